@@ -1,0 +1,27 @@
+"""TensorDict keys shared by more than one module.
+
+Shapes use: B batch, T time, K keypoints, N objects, D features, H/W image.
+Transitions follow TorchRL's ``("next", key)`` convention; predictions are written to the
+same keys under ``"next"``.
+"""
+
+from __future__ import annotations
+
+PIXELS = "pixels"  # uint8 [*B, H, W, 3] from the env
+ACTION = "action"  # float32 [*B, 4] push (start x, start y, end x, end y) in [-1, 1]
+OBJECT_POS = "object_pos"  # float32 [*B, N, 2] metres, table frame (evaluation only)
+OBJECT_YAW = "object_yaw"  # float32 [*B, N] radians (evaluation only)
+UNSTABLE = "unstable"  # bool [*B, 1] the simulation went unstable; the episode ended
+REWARD = ("next", "reward")  # [*B, 1]
+DONE = "done"
+TERMINATED = "terminated"
+TRUNCATED = "truncated"
+
+PIXELS_0 = "pixels_0"  # uint8 [*B, H, W, 3] first frame I_0 of the transition's episode
+EPISODE = "episode"  # int64 [*B] episode index within a dataset
+STEP = "step"  # int64 [*B] push index within its episode
+
+KP_POS = ("keypoints", "pos")  # float32 [*B, K, 2] image coordinates in [-1, 1]
+KP_FEAT = ("keypoints", "feat")  # float32 [*B, K, D]
+GOAL_KP_POS = ("goal", "keypoints", "pos")
+GOAL_KP_FEAT = ("goal", "keypoints", "feat")
