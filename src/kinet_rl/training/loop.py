@@ -1,0 +1,213 @@
+"""The training loop: resumable, NaN-guarded, logged, with periodic validation and images."""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import torch
+from tensordict import TensorDictBase
+from torch import nn
+from torchrl.record.loggers import Logger
+from tqdm.auto import tqdm
+
+from kinet_rl.training.checkpoint import TrainingCheckpoint
+from kinet_rl.training.distributed import DistContext, mean_across_processes, wrap_data_parallel
+
+log = logging.getLogger(__name__)
+
+
+class TransitionSampler(Protocol):
+    """Anything that draws random batches of transitions (e.g. a kinet_rl dataset split)."""
+
+    def sample(self, batch_size: int, generator: torch.Generator | None = None) -> TensorDictBase:
+        """Returns a ``[batch_size]`` TensorDict of transitions."""
+        ...
+
+
+class DivergenceError(RuntimeError):
+    """The loss became NaN or infinite; the last good checkpoint is kept."""
+
+
+@dataclass(frozen=True)
+class TrainerSettings:
+    """How long and how a model is trained.
+
+    Args:
+        steps: optimiser steps in total (a resumed run continues up to this count).
+        batch_size: transitions per step and process.
+        lr: Adam learning rate.
+        grad_clip: gradient-norm clipping (0 disables it).
+        log_every: steps between scalar logs.
+        eval_every: steps between validations (and best-checkpoint updates).
+        checkpoint_every: steps between checkpoints.
+        val_batches: batches averaged per validation.
+        seed: seed of batch sampling (each process adds its rank).
+    """
+
+    steps: int = 2000
+    batch_size: int = 32
+    lr: float = 1e-3
+    grad_clip: float = 10.0
+    log_every: int = 25
+    eval_every: int = 250
+    checkpoint_every: int = 250
+    val_batches: int = 8
+    seed: int = 0
+
+
+Validator = Callable[[int], dict[str, float]]
+
+
+def total_loss(losses: TensorDictBase) -> torch.Tensor:
+    """Sum of every ``loss_*`` entry of a loss module's output."""
+    return sum(v for k, v in losses.items() if str(k).startswith("loss_"))  # type: ignore[return-value]
+
+
+def _check_finite(losses: TensorDictBase, step: int) -> None:
+    bad = [k for k, v in losses.items() if not torch.isfinite(v).all()]
+    if bad:
+        raise DivergenceError(
+            f"Loss terms {bad} are not finite at step {step}; training stopped and the last good "
+            "checkpoint was kept. Lower trainer.lr, raise trainer.grad_clip, or check the data."
+        )
+
+
+class Trainer:
+    """Trains a loss module's parameters on sampled transitions, resuming from its run directory.
+
+    Args:
+        loss_module: a module mapping a batch TensorDict to ``loss_*`` scalars (e.g. ``KINetLoss``).
+        train_data: sampler of training batches.
+        val_data: sampler of validation batches.
+        settings: see :class:`TrainerSettings`.
+        checkpoint: the run's :class:`TrainingCheckpoint` (run directory and identity).
+        logger: a TorchRL logger.
+        ctx: data-parallel context (single process by default).
+        on_validate: optional extra validation (e.g. keypoint accuracy, image summaries) called
+            with the step on the main process; its scalars are logged.
+    """
+
+    def __init__(
+        self,
+        loss_module: nn.Module,
+        train_data: TransitionSampler,
+        val_data: TransitionSampler,
+        settings: TrainerSettings,
+        checkpoint: TrainingCheckpoint,
+        logger: Logger,
+        ctx: DistContext | None = None,
+        on_validate: Validator | None = None,
+    ) -> None:
+        self.ctx = ctx or DistContext()
+        self.loss_module = loss_module.to(self.ctx.device)
+        self.parallel_loss = wrap_data_parallel(self.loss_module, self.ctx)
+        self.train_data, self.val_data = train_data, val_data
+        self.settings = settings
+        self.checkpoint = checkpoint
+        self.logger = logger
+        self.on_validate = on_validate
+        self.optimizer = torch.optim.Adam(self.loss_module.parameters(), lr=settings.lr)
+        self.generator = torch.Generator().manual_seed(settings.seed + self.ctx.rank)
+        self.step = 0
+        self.best_val = math.inf
+
+    def state_dict(self) -> dict[str, Any]:
+        return {
+            "model": self.loss_module.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "step": self.step,
+            "best_val": self.best_val,
+            "generator": self.generator.get_state(),
+            "logger": self.logger.state_dict(),
+        }
+
+    def resume(self) -> bool:
+        """Loads the run's latest checkpoint if there is one; returns whether it did."""
+        state = self.checkpoint.load_latest()
+        if state is None:
+            return False
+        self.loss_module.load_state_dict(state["model"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.step, self.best_val = int(state["step"]), float(state["best_val"])
+        self.generator.set_state(state["generator"])
+        self.logger.load_state_dict(state["logger"])
+        return True
+
+    def _batch(self, data: TransitionSampler) -> TensorDictBase:
+        return data.sample(self.settings.batch_size, self.generator).to(self.ctx.device)
+
+    def train_step(self) -> TensorDictBase:
+        """One optimiser step; returns the detached loss terms."""
+        self.loss_module.train()
+        losses = self.parallel_loss(self._batch(self.train_data))
+        _check_finite(losses, self.step)
+        self.optimizer.zero_grad(set_to_none=True)
+        total_loss(losses).backward()
+        if self.settings.grad_clip > 0:
+            nn.utils.clip_grad_norm_(self.loss_module.parameters(), self.settings.grad_clip)
+        self.optimizer.step()
+        self.step += 1
+        return losses.detach()
+
+    @torch.no_grad()
+    def validate(self) -> dict[str, float]:
+        """Mean validation loss terms over ``val_batches`` batches (plus ``on_validate``)."""
+        self.loss_module.eval()
+        sums: dict[str, float] = {}
+        for _ in range(self.settings.val_batches):
+            for key, value in self.loss_module(self._batch(self.val_data)).items():
+                sums[f"val/{key}"] = sums.get(f"val/{key}", 0.0) + value.item()
+        scores = {
+            k: mean_across_processes(v / self.settings.val_batches, self.ctx)
+            for k, v in sums.items()
+        }
+        scores["val/loss"] = sum(v for k, v in scores.items() if k.startswith("val/loss_"))
+        if self.on_validate is not None and self.ctx.is_main:
+            scores.update(self.on_validate(self.step))
+        return scores
+
+    def _log(self, scalars: dict[str, float]) -> None:
+        if self.ctx.is_main:
+            for name, value in scalars.items():
+                self.logger.log_scalar(name, value, step=self.step)
+
+    def _save(self, best: bool = False) -> None:
+        if self.ctx.is_main:
+            self.checkpoint.save(self.state_dict(), best=best)
+
+    def fit(self) -> dict[str, float]:
+        """Trains until ``settings.steps``; returns the last validation scores."""
+        s = self.settings
+        bar = tqdm(
+            total=s.steps,
+            initial=self.step,
+            desc="train",
+            disable=not self.ctx.is_main,
+            dynamic_ncols=True,
+        )
+        scores: dict[str, float] = {}
+        while self.step < s.steps:
+            losses = self.train_step()
+            bar.update(1)
+            if self.step % s.log_every == 0 or self.step == s.steps:
+                terms = {f"train/{k}": v.item() for k, v in losses.items()}
+                terms["train/loss"] = sum(terms.values())
+                self._log(terms)
+                bar.set_postfix(loss=f"{terms['train/loss']:.4f}")
+            if self.step % s.eval_every == 0 or self.step == s.steps:
+                scores = self.validate()
+                self._log(scores)
+                is_best = scores["val/loss"] < self.best_val
+                self.best_val = min(self.best_val, scores["val/loss"])
+                self._save(best=is_best)
+            elif self.step % s.checkpoint_every == 0:
+                self._save()
+        bar.close()
+        if not scores:
+            scores = self.validate()
+        return scores
+

@@ -1,0 +1,218 @@
+"""Integration tests of the pushing environments (MuJoCo stepping and rendering)."""
+
+from __future__ import annotations
+
+import logging
+import os
+
+import gymnasium
+import numpy as np
+import pytest
+import torch
+from torchrl.envs.utils import check_env_specs
+
+from kinet_rl.envs import GYM_IDS, make_dm_env, make_env, workspace_for
+
+pytestmark = pytest.mark.slow
+
+YCB_DIR = os.environ.get("KINET_RL_YCB_DIR")
+needs_ycb = pytest.mark.skipif(
+    not YCB_DIR, reason="KINET_RL_YCB_DIR is not set (YCB assets needed)"
+)
+
+
+def _maybe_ycb(task):
+    return [needs_ycb] if task == "ycb" else []
+
+
+# Pairwise cover of task x camera x objects x geometry x background.
+VARIANTS = [
+    ("blocks", "top", 1, "train", "fixed"),
+    ("blocks", "side", 3, "gen", "random"),
+    ("blocks", "top", 5, "gen", "random"),
+    ("blocks", "side", 5, "train", "fixed"),
+    ("ycb", "side", 1, "train", "random"),
+    ("ycb", "top", 3, "train", "fixed"),
+    ("ycb", "top", 5, "gen", "random"),
+    ("ycb", "side", 5, "gen", "fixed"),
+]
+
+
+@pytest.mark.parametrize(
+    "variant", [pytest.param(v, marks=_maybe_ycb(v[0]), id="-".join(map(str, v))) for v in VARIANTS]
+)
+def test_every_variant_steps_and_passes_check_env_specs(variant):
+    task, camera, num, geometry, background = variant
+    env = make_env(
+        task=task,
+        camera=camera,
+        num_objects=num,
+        geometry=geometry,
+        background=background,
+        seed=3,
+        max_steps=2,
+    )
+    check_env_specs(env)
+    td = env.rollout(5, break_when_any_done=True)
+    assert td.shape == (2,)  # StepCounter truncates at max_steps
+    assert td["next", "truncated"][-1].item()
+    assert (
+        td["next", "pixels"].shape == (2, 64, 64, 3) and td["next", "pixels"].dtype == torch.uint8
+    )
+    pos = td["next", "object_pos"]
+    assert pos.shape == (2, num, 2) and pos.dtype == torch.float32
+    assert td["next", "object_yaw"].shape == (2, num)
+    assert not td["next", "unstable"].any()
+    assert (pos.abs() <= workspace_for(task).table_half_size).all()
+    assert td["next", "pixels"].float().std() > 5.0  # a real image, not a blank frame
+
+
+def test_same_seed_gives_identical_observations_and_other_seed_differs():
+    action = torch.tensor([-0.6, -0.1, 0.7, 0.2])
+
+    def rollout(seed):
+        env = make_env(seed=seed, background="random")
+        return env.rollout(3, policy=lambda td: td.set("action", action))
+
+    first, second, other = rollout(7), rollout(7), rollout(8)
+    assert torch.equal(first["next", "pixels"], second["next", "pixels"])
+    assert torch.equal(first["next", "object_pos"], second["next", "object_pos"])
+    assert not torch.equal(first["pixels"][0], other["pixels"][0])
+
+
+def test_push_through_an_object_moves_it_and_a_far_push_moves_none():
+    env = make_dm_env(num_objects=3, seed=11)
+    ws = env.task.workspace
+    pos0 = env.reset().observation["object_pos"]
+    far = np.array([-1.0, -1.0, -1.0, -1.0])  # a zero-length push in a corner
+    pos1 = env.step(far).observation["object_pos"]
+    np.testing.assert_allclose(pos1, pos0, atol=1e-4)
+    target = pos0[0]
+    direction = -np.sign(target[0]) or 1.0  # push towards the centre
+    start = target - direction * np.array([0.09, 0.0])
+    end = target + direction * np.array([0.05, 0.0])
+    pos2 = env.step(np.concatenate([ws.to_action(start), ws.to_action(end)])).observation[
+        "object_pos"
+    ]
+    moved = np.linalg.norm(pos2 - pos1, axis=1)
+    assert moved[0] > 0.03, f"the pushed object moved only {moved[0]:.4f} m"
+    assert (pos2[0, 0] - pos1[0, 0]) * direction > 0.03  # along the push direction
+
+
+def test_set_object_poses_round_trips():
+    env = make_dm_env(num_objects=2, seed=0)
+    env.reset()
+    xy = np.array([[0.1, -0.05], [-0.1, 0.08]])
+    yaw = np.array([0.3, -2.0])
+    env.task.set_object_poses(env.physics, xy, yaw)
+    got_xy, got_yaw = env.task.object_poses(env.physics)
+    np.testing.assert_allclose(got_xy, xy, atol=1e-6)
+    np.testing.assert_allclose(got_yaw, yaw, atol=1e-6)
+    with pytest.raises(ValueError, match="needs 2 poses"):
+        env.task.set_object_poses(env.physics, xy[:1], yaw[:1])
+
+
+@needs_ycb
+def test_ycb_objects_rest_stably_and_held_out_sets_work():
+    names = ["003_cracker_box", "005_tomato_soup_can", "025_mug", "035_power_drill", "011_banana"]
+    env = make_dm_env(task="ycb", num_objects=5, seed=2, ycb_objects=names)
+    ts = env.reset()
+    assert set(env.task.active) == {f"ycb_{n}" for n in names}
+    pos0, yaw0 = ts.observation["object_pos"], ts.observation["object_yaw"]
+    for _ in range(3):
+        ts = env.step(np.array([1.0, 1.0, 1.0, 1.0]))  # far, zero-length pushes
+    drift = np.abs(ts.observation["object_pos"] - pos0).max()
+    turn = np.abs(np.angle(np.exp(1j * (ts.observation["object_yaw"] - yaw0)))).max()
+    assert drift < 2e-3 and turn < 0.02, (drift, turn)
+    with pytest.raises(ValueError, match="exceeds the 2 YCB objects"):
+        make_dm_env(task="ycb", num_objects=3, ycb_objects=names[:2])
+
+
+def test_unstable_flag_fires_on_blow_up_and_is_counted(caplog):
+    env = make_env(num_objects=2, seed=0, max_steps=None)
+    dm = env._env  # the wrapped dm_control environment
+    far = torch.tensor([1.0, 1.0, 1.0, 1.0])
+    td = env.step(env.reset().set("action", far))
+    assert not td["next", "unstable"].item() and not td["next", "done"].item()
+    # A blown-up contact: one object suddenly at 80 m/s.
+    td = env.reset()
+    dm.physics.named.data.qvel[dm.task.active[0]][:3] = [80.0, 0.0, 0.0]
+    with caplog.at_level(logging.WARNING, logger="kinet_rl.envs.task"):
+        td = env.step(td.set("action", far))
+    assert td["next", "unstable"].item() and td["next", "terminated"].item()
+    assert dm.task.unstable_count == 1
+    assert "Unstable simulation (velocity explosion" in caplog.text
+    # A NaN state: flagged, counted, and the physics state is made valid again.
+    td = env.reset()
+    assert not td["unstable"].item()
+    dm.physics.data.qpos[-1] = np.nan
+    with caplog.at_level(logging.WARNING, logger="kinet_rl.envs.task"):
+        td = env.step(td.set("action", far))
+    assert td["next", "unstable"].item() and td["next", "terminated"].item()
+    assert dm.task.unstable_count == 2
+    assert "MuJoCo reset the simulation (mjWARN_BADQPOS)" in caplog.text
+    assert np.all(np.isfinite(dm.physics.data.qpos))
+
+
+@pytest.mark.parametrize("task", [pytest.param(t, marks=_maybe_ycb(t)) for t in GYM_IDS])
+def test_gymnasium_ids(task):
+    env = gymnasium.make(GYM_IDS[task], render_mode="rgb_array", num_objects=2, image_size=48)
+    obs, _ = env.reset(seed=4)
+    assert env.observation_space.contains(obs)
+    assert env.render().shape == (48, 48, 3)
+    obs, reward, terminated, truncated, _ = env.step(env.action_space.sample())
+    assert env.observation_space.contains(obs) and not terminated and not truncated
+    again, _ = env.reset(seed=4)
+    first, _ = gymnasium.make(GYM_IDS[task], num_objects=2, image_size=48).reset(seed=4)
+    np.testing.assert_array_equal(again["pixels"], first["pixels"])
+    env.close()
+
+
+def _project(physics, camera, points):
+    """Pixel coordinates in [0, 1] of world points seen by a named camera (pinhole model)."""
+    cam = physics.model.name2id(camera, "camera")
+    pos, rot = physics.data.cam_xpos[cam], physics.data.cam_xmat[cam].reshape(3, 3)
+    local = (points - pos) @ rot  # camera frame: x right, y up, looking along -z
+    scale = np.tan(np.radians(physics.model.cam_fovy[cam]) / 2)
+    u = 0.5 + 0.5 * local[:, 0] / (-local[:, 2] * scale)
+    v = 0.5 - 0.5 * local[:, 1] / (-local[:, 2] * scale)
+    return np.stack([u, v], axis=1)
+
+
+@pytest.mark.parametrize("task", [pytest.param(t, marks=_maybe_ycb(t)) for t in ("blocks", "ycb")])
+def test_cameras_frame_the_whole_workspace(task):
+    env = make_dm_env(task=task, num_objects=1, seed=0)
+    env.reset()
+    ws = env.task.workspace
+    corners = np.array([[x, y, ws.table_height] for x in (-1, 1) for y in (-1, 1)], dtype=float)
+    corners[:, :2] *= ws.half_size
+    for camera in ("top", "side"):
+        uv = _project(env.physics, camera, corners)
+        assert np.all((uv > 0.0) & (uv < 1.0)), (camera, uv)
+
+
+@pytest.mark.parametrize("geometry", ["train", "gen"])
+def test_runtime_block_mass_properties_match_mujoco_compiler(geometry):
+    import mujoco
+
+    from kinet_rl.envs.blocks import BLOCK_DENSITY
+
+    env = make_dm_env(num_objects=2, geometry=geometry, seed=5)
+    env.reset()
+    model = env.physics.model
+    for body in env.task.active:
+        body_id = model.name2id(body, "body")
+        geoms = [model.name2id(f"{body}_{s}", "geom") for s in "ab"]
+        boxes = "".join(
+            f'<geom type="box" size="{" ".join(map(str, model.geom_size[g]))}" '
+            f'pos="{" ".join(map(str, model.geom_pos[g]))}" density="{BLOCK_DENSITY}"/>'
+            for g in geoms
+        )
+        reference = mujoco.MjModel.from_xml_string(
+            f'<mujoco><worldbody><body name="b"><freejoint/>{boxes}</body></worldbody></mujoco>'
+        )
+        assert model.body_mass[body_id] == pytest.approx(reference.body_mass[1], rel=1e-9)
+        np.testing.assert_allclose(reference.body_ipos[1], 0.0, atol=1e-9)  # COM at the origin
+        np.testing.assert_allclose(
+            np.sort(model.body_inertia[body_id]), np.sort(reference.body_inertia[1]), rtol=1e-6
+        )
