@@ -10,11 +10,11 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-from pathlib import Path
 
 import numpy as np
 from PIL import Image, ImageDraw
 
+from kinet_rl.atomic import atomic_save_with
 from kinet_rl.envs.factory import make_dm_env
 from kinet_rl.envs.ycb import YCB_DIR_ENV
 
@@ -83,11 +83,7 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO)
     sheet = render_contact_sheet(args.size, args.ycb_dir, args.seed)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
-    sheet.save(tmp, format="PNG")
-    os.replace(tmp, out)
+    out = atomic_save_with(args.out, lambda f: sheet.save(f, format="PNG"))
     logger.info("Wrote %s", out)
 
 

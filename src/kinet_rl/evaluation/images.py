@@ -11,6 +11,8 @@ import torch
 from PIL import Image, ImageDraw
 from torch import Tensor
 
+from kinet_rl.atomic import atomic_save_with
+
 # Distinct colours for up to 12 keypoints (tab20-like), cycled beyond that.
 KEYPOINT_COLOURS = [
     (230, 25, 75), (60, 180, 75), (255, 225, 25), (0, 130, 200), (245, 130, 48), (145, 30, 180),
@@ -67,10 +69,5 @@ def upscale(image: Tensor | np.ndarray, scale: int) -> np.ndarray:
 
 
 def save_png(image: np.ndarray, path: str | os.PathLike) -> Path:
-    """Writes a PNG atomically (temporary file, then rename) and returns its path."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    Image.fromarray(image).save(tmp, format="PNG")
-    os.replace(tmp, path)
-    return path
+    """Writes a PNG atomically and returns its path."""
+    return atomic_save_with(path, lambda f: Image.fromarray(image).save(f, format="PNG"))

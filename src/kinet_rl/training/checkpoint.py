@@ -7,42 +7,9 @@ import os
 from pathlib import Path
 from typing import Any
 
-import torch
+from kinet_rl.atomic import CheckpointError, atomic_torch_save, safe_torch_load
 
 log = logging.getLogger(__name__)
-
-
-class CheckpointError(RuntimeError):
-    """A checkpoint is missing, corrupt, truncated or does not match the run's config."""
-
-
-def atomic_torch_save(obj: Any, path: str | os.PathLike) -> None:
-    """Writes ``obj`` with ``torch.save`` to a temporary file, then renames it over ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "wb") as f:
-        torch.save(obj, f)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-
-
-def safe_torch_load(path: str | os.PathLike) -> dict[str, Any]:
-    """Loads a checkpoint with ``weights_only=True`` and turns failures into a clear error."""
-    path = Path(path)
-    if not path.is_file():
-        raise CheckpointError(f"No checkpoint at {path}.")
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as err:  # torch raises several types for truncated/corrupt files
-        raise CheckpointError(
-            f"Checkpoint {path} is corrupt or truncated ({type(err).__name__}: {err}). "
-            "Delete it to start the run afresh, or point to another checkpoint."
-        ) from err
-    if not isinstance(state, dict):
-        raise CheckpointError(f"Checkpoint {path} does not hold a dict; it was not written by kinet_rl.")
-    return state
 
 
 class TrainingCheckpoint:

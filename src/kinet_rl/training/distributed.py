@@ -51,10 +51,9 @@ def wrap_data_parallel(module: nn.Module, ctx: DistContext) -> nn.Module:
     if ctx.world_size == 1:
         return module
     device_ids = [ctx.device.index] if ctx.device.type == "cuda" else None
-    # Ablations leave some parameters unused (e.g. the edge encoder of KINet-determ).
-    return nn.parallel.DistributedDataParallel(
-        module, device_ids=device_ids, find_unused_parameters=True
-    )
+    # A static graph tolerates parameters that a loss never uses (e.g. an ablation's) and a
+    # TensorDict output, which find_unused_parameters cannot traverse.
+    return nn.parallel.DistributedDataParallel(module, device_ids=device_ids, static_graph=True)
 
 
 def mean_across_processes(value: float, ctx: DistContext) -> float:

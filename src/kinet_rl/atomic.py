@@ -1,0 +1,94 @@
+"""Atomic file writes (temporary file, fsync, rename) and safe checkpoint loading.
+
+Every file kinet_rl writes goes through :func:`atomic_write`, so an interrupted job never leaves a
+half-written checkpoint, dataset marker, image or report behind.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from pathlib import Path
+from typing import IO, Any
+
+import torch
+
+
+class CheckpointError(RuntimeError):
+    """A checkpoint is missing, corrupt, truncated or does not match what the caller expects."""
+
+
+@contextmanager
+def atomic_write(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO[Any]]:
+    """Opens a temporary file beside ``path``; on success syncs it and renames it over ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, mode) as f:
+            yield f
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    dir_fd = os.open(path.parent, os.O_RDONLY)
+    try:
+        os.fsync(dir_fd)
+    finally:
+        os.close(dir_fd)
+
+
+def atomic_write_text(path: str | os.PathLike, text: str) -> None:
+    """Writes ``text`` atomically."""
+    with atomic_write(path, "w") as f:
+        f.write(text)
+
+
+def atomic_write_json(path: str | os.PathLike, payload: Mapping[str, Any]) -> None:
+    """Writes ``payload`` as indented, key-sorted JSON atomically."""
+    atomic_write_text(path, json.dumps(payload, indent=2, sort_keys=True))
+
+
+def atomic_save_with(path: str | os.PathLike, write: Callable[[IO[bytes]], None]) -> Path:
+    """Calls ``write(file)`` on a temporary binary file, then renames it over ``path``."""
+    with atomic_write(path, "wb") as f:
+        write(f)
+    return Path(path)
+
+
+def atomic_torch_save(obj: Any, path: str | os.PathLike) -> None:
+    """``torch.save`` to ``path`` atomically."""
+    atomic_save_with(path, lambda f: torch.save(obj, f))
+
+
+def safe_torch_load(
+    path: str | os.PathLike, required: tuple[str, ...] = (), writer: str = "kinet_rl"
+) -> dict[str, Any]:
+    """Loads a checkpoint dict with ``weights_only=True``, turning every failure into a clear error.
+
+    Args:
+        path: Checkpoint file.
+        required: Top-level entries the dict must hold.
+        writer: What writes such files, named in the error for a foreign file.
+
+    Raises:
+        CheckpointError: Missing, corrupt, truncated or foreign file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"No checkpoint file at {path}; check the path or train a model first.")
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as err:  # torch raises several types for truncated or corrupt files
+        raise CheckpointError(
+            f"Checkpoint {path} is corrupt or truncated ({type(err).__name__}: {err}); "
+            "delete it (a training run then starts afresh) or point to another checkpoint."
+        ) from err
+    if not isinstance(state, dict) or any(key not in state for key in required):
+        raise CheckpointError(
+            f"Checkpoint {path} lacks the entries {list(required)}; it was not written by {writer}."
+        )
+    return state

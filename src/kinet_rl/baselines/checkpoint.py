@@ -1,0 +1,89 @@
+"""Checkpointing for models rebuilt from a constructor config: atomic saves, safe loads.
+
+A model that mixes in :class:`ConfigCheckpointMixin` keeps its constructor arguments in
+``self.config`` and names its file format in ``checkpoint_format``; the mixin writes weights and
+config atomically and rebuilds the model from them (``weights_only=True``), refusing files of
+another model or with settings other than the caller expects.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from typing import Any, ClassVar, TypeVar
+
+from torch import nn
+
+from kinet_rl.atomic import CheckpointError, atomic_torch_save, safe_torch_load
+
+log = logging.getLogger(__name__)
+
+ModelT = TypeVar("ModelT", bound="ConfigCheckpointMixin")
+
+
+class ConfigCheckpointMixin:
+    """``save_checkpoint``/``from_checkpoint`` for an ``nn.Module`` built from ``self.config``.
+
+    Subclasses set the class attribute ``checkpoint_format`` (e.g. ``"kinet_rl.X/1"``) and store
+    their JSON-like constructor arguments in ``self.config``.
+    """
+
+    checkpoint_format: ClassVar[str]
+    config: dict[str, Any]
+
+    def save_checkpoint(self, path: str | os.PathLike, config: dict[str, Any] | None = None) -> None:
+        """Atomically writes weights, the constructor config and optional run ``config`` metadata."""
+        assert isinstance(self, nn.Module)
+        state = {
+            "format": self.checkpoint_format,
+            "model_config": dict(self.config),
+            "config": dict(config or {}),
+            "state_dict": self.state_dict(),
+        }
+        atomic_torch_save(state, path)
+        log.info("Saved %s checkpoint to %s", type(self).__name__, path)
+
+    @classmethod
+    def from_checkpoint(
+        cls: type[ModelT], path: str | os.PathLike, expected_config: dict[str, Any] | None = None
+    ) -> ModelT:
+        """Rebuilds a model saved by :meth:`save_checkpoint` (loaded with ``weights_only=True``).
+
+        Args:
+            path: Checkpoint file.
+            expected_config: Constructor settings the caller relies on; any that differ from the
+                stored ones raise :class:`CheckpointError`.
+
+        Raises:
+            CheckpointError: Missing, corrupt, truncated, foreign or mismatching checkpoint.
+        """
+        state = safe_torch_load(
+            path, ("format", "model_config", "state_dict"), f"{cls.__name__}.save_checkpoint"
+        )
+        if state["format"] != cls.checkpoint_format:
+            raise CheckpointError(
+                f"Checkpoint {path} has format {state['format']!r}, but {cls.__name__} reads "
+                f"{cls.checkpoint_format!r}; load it with the model class that wrote it."
+            )
+        stored = state["model_config"]
+        diffs = {
+            key: (value, stored.get(key, "<missing>"))
+            for key, value in (expected_config or {}).items()
+            if stored.get(key, "<missing>") != value
+        }
+        if diffs:
+            detail = ", ".join(f"{k}: expected {e!r}, checkpoint {s!r}" for k, (e, s) in diffs.items())
+            raise CheckpointError(
+                f"Checkpoint {path} does not match the requested model config ({detail}); "
+                "use a checkpoint trained with these settings or change the config to match."
+            )
+        try:
+            model = cls(**stored)
+            assert isinstance(model, nn.Module)
+            model.load_state_dict(state["state_dict"])
+        except (TypeError, RuntimeError) as err:
+            raise CheckpointError(
+                f"Checkpoint {path} holds weights that do not fit its model config ({err}); "
+                "the file was edited or written by an incompatible version, re-save it."
+            ) from err
+        return model

@@ -1,0 +1,150 @@
+"""Training losses of the baselines, as TorchRL ``LossModule``s returning weighted ``loss_*``.
+
+Reference: KINet, Rezazadeh et al., RA-L 2023, Sec. 4 (Baselines).
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from tensordict import TensorDict, TensorDictBase
+from torch import Tensor
+from torchrl.objectives import LossModule
+
+from kinet_rl.baselines.image_models import ImageForwardInverseModel, ImageForwardModel
+from kinet_rl.baselines.object_models import ObjectInteractionModel
+from kinet_rl.keys import ACTION, OBJECT_POS, PIXELS
+
+
+def _require(tensordict: TensorDictBase, keys: list, what: str) -> list[Tensor]:
+    """The entries ``keys`` of a batch, or a KeyError naming every key ``what`` needs."""
+    missing = [key for key in keys if tensordict.get(key, None) is None]
+    if missing:
+        raise KeyError(f"A {what} training batch needs {keys}; missing: {missing}.")
+    return [tensordict.get(key) for key in keys]
+
+
+def _check_weights(**weights: float) -> None:
+    for name, value in weights.items():
+        if value < 0:
+            raise ValueError(f"{name} must be >= 0, got {value}.")
+
+
+def feature_info_nce(predicted: Tensor, target: Tensor, temperature: float = 1.0) -> Tensor:
+    """InfoNCE with logits ``-|z_hat_b - z'_c|^2 / temperature``; sample ``b``'s positive is ``c = b``.
+
+    Args:
+        predicted: ``[B, D]`` predicted next features.
+        target: ``[B, D]`` features of the true next frames (the other rows are negatives).
+    """
+    logits = -torch.cdist(predicted, target).pow(2) / temperature
+    return F.cross_entropy(logits, torch.arange(predicted.shape[0], device=predicted.device))
+
+
+class ImageForwardLoss(LossModule):
+    """Losses of Forw (``inv_weight = 0``) and ForwInv.
+
+    ``loss_fwd``: mean over the batch of ``|z_hat_t+1 - z_t+1|^2`` (gradient to both sides).
+    ``loss_ctr``: :func:`feature_info_nce` between predicted and true next features, which stops
+    the features from collapsing (other samples' next frames are the negatives). ``loss_inv``
+    (ForwInv only): ``|f_inv(z_t, z_t+1) - u_t|^2``. ``loss_probe``: the evaluation probe's
+    squared error on ground-truth displacements (workspace units) from *detached* features; it
+    trains only the probe. Each entry is already weighted.
+
+    Keys:
+        Reads a ``[B]`` batch with ``PIXELS``, ``("next", PIXELS)`` ``[B, H, W, 3]``, ``ACTION``
+        ``[B, 4]``, ``OBJECT_POS`` and ``("next", OBJECT_POS)`` ``[B, N, 2]`` (probe only).
+        Returns scalars ``loss_fwd``, ``loss_ctr``, ``loss_probe`` and, for ForwInv, ``loss_inv``.
+
+    Args:
+        world_model: An :class:`ImageForwardModel` (or :class:`ImageForwardInverseModel`).
+        fwd_weight: Weight of ``loss_fwd``.
+        ctr_weight: Weight of ``loss_ctr``.
+        inv_weight: Weight of ``loss_inv``; must be 0 unless the model has an inverse model.
+        probe_weight: Weight of ``loss_probe``.
+        ctr_temperature: Temperature of the contrastive logits.
+    """
+
+    def __init__(
+        self,
+        world_model: ImageForwardModel,
+        fwd_weight: float = 1.0,
+        ctr_weight: float = 1.0,
+        inv_weight: float = 0.0,
+        probe_weight: float = 1.0,
+        ctr_temperature: float = 1.0,
+    ) -> None:
+        super().__init__()
+        _check_weights(
+            fwd_weight=fwd_weight, ctr_weight=ctr_weight, inv_weight=inv_weight, probe_weight=probe_weight
+        )
+        if ctr_temperature <= 0:
+            raise ValueError(f"ctr_temperature must be > 0, got {ctr_temperature}.")
+        if inv_weight > 0 and not isinstance(world_model, ImageForwardInverseModel):
+            raise ValueError(
+                f"inv_weight={inv_weight} needs an inverse model, but the model is a "
+                f"{type(world_model).__name__}; use model=forwinv (ImageForwardInverseModel) or "
+                "set loss.inv_weight=0."
+            )
+        self.world_model = world_model
+        self.fwd_weight = fwd_weight
+        self.ctr_weight = ctr_weight
+        self.inv_weight = inv_weight
+        self.probe_weight = probe_weight
+        self.ctr_temperature = ctr_temperature
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDict:
+        """Computes the weighted losses (see class docstring)."""
+        pixels, next_pixels, action, pos, next_pos = _require(
+            tensordict,
+            [PIXELS, ("next", PIXELS), ACTION, OBJECT_POS, ("next", OBJECT_POS)],
+            type(self.world_model).__name__,
+        )
+        model = self.world_model
+        feat, next_feat = model.encode(torch.cat([pixels, next_pixels])).chunk(2)
+        predicted = model.predict(feat, action)
+        losses = {
+            "loss_fwd": self.fwd_weight * (predicted - next_feat).pow(2).sum(-1).mean(),
+            "loss_ctr": self.ctr_weight
+            * feature_info_nce(predicted, next_feat, self.ctr_temperature),
+        }
+        if isinstance(model, ImageForwardInverseModel):
+            inferred = model.infer_action(feat, next_feat)
+            losses["loss_inv"] = self.inv_weight * (inferred - action).pow(2).sum(-1).mean()
+        scale = model.position_scale
+        motion = model.probe(feat.detach(), next_feat.detach(), pos / scale)
+        probe_error = (motion - (next_pos - pos) / scale).pow(2).sum(-1).mean()
+        losses["loss_probe"] = self.probe_weight * probe_error
+        return TensorDict(losses, batch_size=[])
+
+
+class ObjectForwardLoss(LossModule):
+    """Loss of IN and VisIN: squared error of the predicted next object positions.
+
+    ``loss_fwd``: mean over the batch of ``sum_n |p_hat_n - p_n|^2`` in workspace units
+    (``xy / half_size``), weighted by ``fwd_weight``.
+
+    Keys:
+        Reads a ``[B]`` batch with ``OBJECT_POS``, ``("next", OBJECT_POS)`` ``[B, N, 2]``,
+        ``ACTION`` ``[B, 4]`` and, for VisIN, ``PIXELS`` ``[B, H, W, 3]``. Returns ``loss_fwd``.
+
+    Args:
+        world_model: An :class:`ObjectInteractionModel` (IN) or ``VisualInteractionModel``.
+        fwd_weight: Weight of ``loss_fwd``.
+    """
+
+    def __init__(self, world_model: ObjectInteractionModel, fwd_weight: float = 1.0) -> None:
+        super().__init__()
+        _check_weights(fwd_weight=fwd_weight)
+        self.world_model = world_model
+        self.fwd_weight = fwd_weight
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDict:
+        """Computes the weighted loss (see class docstring)."""
+        pos, next_pos, action = _require(
+            tensordict, [OBJECT_POS, ("next", OBJECT_POS), ACTION], type(self.world_model).__name__
+        )
+        model = self.world_model
+        predicted = model.predict(pos, model.node_features(tensordict), action)
+        error = ((predicted - next_pos) / model.position_scale).pow(2).sum(dim=(-2, -1)).mean()
+        return TensorDict({"loss_fwd": self.fwd_weight * error}, batch_size=[])

@@ -1,0 +1,161 @@
+"""Rearrangement report: distance-to-goal plot, markdown tables, JSON and GIF videos."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import torch
+
+from kinet_rl.atomic import atomic_save_with, atomic_write_json, atomic_write_text
+from kinet_rl.evaluation.images import draw_keypoints, image_grid, upscale
+from kinet_rl.evaluation.projection import normalised_to_pixels
+
+if TYPE_CHECKING:
+    from kinet_rl.control.evaluation import RearrangementSettings
+    from kinet_rl.control.rearrange import EpisodeResult
+
+LABELS = {
+    "kinet_graph": "KINet-GraphMPC",
+    "kinet_keypoints": "MPC on keypoint positions",
+    "random": "Random pushes",
+    "oracle": "Oracle MPC (GT state, analytic push model)",
+}
+VIDEO_SCALE = 4
+
+Summary = dict[str, dict[str, dict[str, Any]]]
+
+
+def plot_curves(by_method: dict[str, dict[str, Any]], path: Path, title: str) -> Path:
+    """Mean distance to goal (mm) over pushes with a standard-error band, one line per method."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for method, stats in by_method.items():
+        mean = np.asarray(stats["mean_curve"]) * 1e3
+        sem = np.asarray(stats["sem_curve"]) * 1e3
+        steps = np.arange(len(mean))
+        ax.plot(steps, mean, label=f"{LABELS.get(method, method)} (n={stats['episodes']})")
+        ax.fill_between(steps, mean - sem, mean + sem, alpha=0.2)
+    ax.set_xlabel("push t")
+    ax.set_ylabel("mean object distance to goal [mm]")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    atomic_save_with(path, lambda f: fig.savefig(f, format="png", dpi=120))
+    plt.close(fig)
+    return path
+
+
+def markdown(settings: RearrangementSettings, summary: Summary, plot_name: str) -> str:
+    """The markdown section: settings, comparison table, Table II layout and backgrounds."""
+    task, scene = settings.task, settings.scene
+    lines = [
+        "## Rearrangement (GraphMPC)",
+        "",
+        f"Scene: {scene.task}, {scene.num_objects} objects, {scene.camera} camera, "
+        f"{scene.image_size} px, geometry {scene.geometry}, background {scene.background}. "
+        f"T = {task.num_steps} pushes; goals made by {task.goal_pushes} random object pushes from "
+        f"the start (reachable). Distances are ground truth, mean over objects, in mm; success = "
+        f"every object within {task.success_threshold * 1e3:.0f} mm of its goal at T. "
+        f"KINet planner: {dict(settings.planner)}.",
+        "",
+        f"![distance to goal]({plot_name})",
+        "",
+        "| method | episodes | start [mm] | final [mm] | success |",
+        "|---|---|---|---|---|",
+    ]
+    for method, stats in summary.get("comparison", {}).items():
+        lines.append(
+            f"| {LABELS.get(method, method)} | {stats['episodes']} | "
+            f"{stats['initial_distance'] * 1e3:.1f} | {_final(stats)} | "
+            f"{stats['success_rate'] * 100:.0f}% |"
+        )
+    cells = {name: stats for name, stats in summary.items() if name.startswith("n")}
+    if cells:
+        geometries = [g for g in settings.geometries if any(k.endswith(f"geom_{g}") for k in cells)]
+        lines += ["", "Generalization (KINet-GraphMPC final distance at T, mm; paper Table II layout):",
+                  "", "| N | " + " | ".join(f"geom_{g}" for g in geometries) + " |",
+                  "|---|" + "---|" * len(geometries)]  # fmt: skip
+        for n in settings.num_objects:
+            row = [_final(cells.get(f"n{n}_geom_{g}", {}).get("kinet_graph")) for g in geometries]
+            lines.append(f"| {n} | " + " | ".join(row) + " |")
+    backgrounds = {k: v for k, v in summary.items() if k.startswith("background_")}
+    if backgrounds:
+        lines += ["", "Backgrounds (final distance at T, mm):", "",
+                  "| background | KINet-GraphMPC | Random pushes |", "|---|---|---|"]  # fmt: skip
+        for name, by_method in backgrounds.items():
+            lines.append(
+                f"| {name.removeprefix('background_')} | {_final(by_method.get('kinet_graph'))} | "
+                f"{_final(by_method.get('random'))} |"
+            )
+    return "\n".join(lines) + "\n"
+
+
+def _final(stats: dict[str, Any] | None) -> str:
+    if stats is None:
+        return "-"
+    return f"{stats['final_distance'] * 1e3:.1f} ± {stats['final_distance_sem'] * 1e3:.1f}"
+
+
+def video_frames(result: EpisodeResult) -> list[np.ndarray]:
+    """Frames of a recorded episode: current image with keypoints beside the goal image."""
+    if result.goal_pixels is None:
+        raise ValueError("The episode was not recorded (run it with record=True).")
+    size = result.goal_pixels.shape[0]
+    if result.goal_keypoints is not None:
+        goal = draw_keypoints(result.goal_pixels, _pixels(result.goal_keypoints, size), VIDEO_SCALE)
+    else:
+        goal = upscale(result.goal_pixels, VIDEO_SCALE)
+    frames = []
+    for t, frame in enumerate(result.frames):
+        if t < len(result.keypoints):
+            current = draw_keypoints(frame, _pixels(result.keypoints[t], size), VIDEO_SCALE)
+        else:
+            current = upscale(frame, VIDEO_SCALE)
+        frames.append(image_grid([[current, goal]]))
+    return frames
+
+
+def _pixels(keypoints: np.ndarray, size: int) -> torch.Tensor:
+    return normalised_to_pixels(torch.as_tensor(keypoints), size)
+
+
+def write_video(result: EpisodeResult, path: Path, fps: float = 4.0) -> Path:
+    """Writes an episode GIF (current | goal) atomically."""
+    import imageio.v3 as iio
+
+    frames = np.stack(video_frames(result))
+    return atomic_save_with(
+        path, lambda f: iio.imwrite(f, frames, extension=".gif", duration=1000.0 / fps, loop=0)
+    )
+
+
+def write_report(
+    out_dir: Path,
+    settings: RearrangementSettings,
+    summary: Summary,
+    results: dict[str, dict[str, list[EpisodeResult]]],
+) -> list[Path]:
+    """Writes ``rearrangement.png``, ``rearrangement.md``, ``rearrangement.json`` and videos."""
+    from kinet_rl.control.evaluation import _settings_dict
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    files = [plot_curves(summary["comparison"], out_dir / "rearrangement.png",
+                         f"Rearrangement, {settings.scene.num_objects} objects")]  # fmt: skip
+    for name, by_method in summary.items():
+        if name.startswith("background_"):
+            files.append(plot_curves(by_method, out_dir / f"rearrangement_{name}.png", name))
+    for result in results.get("comparison", {}).get("kinet_graph", []):
+        if result.frames:
+            files.append(write_video(result, out_dir / f"rearrangement_seed{result.seed}.gif"))
+    text = markdown(settings, summary, "rearrangement.png")
+    atomic_write_text(out_dir / "rearrangement.md", text)
+    atomic_write_json(out_dir / "rearrangement.json",
+                      {"summary": summary, "settings": _settings_dict(settings)})  # fmt: skip
+    return [*files, out_dir / "rearrangement.md", out_dir / "rearrangement.json"]

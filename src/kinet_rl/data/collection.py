@@ -1,0 +1,281 @@
+"""Random-push data collection with TorchRL collectors into resumable on-disk datasets."""
+
+from __future__ import annotations
+
+import functools
+import importlib.metadata
+import logging
+import platform
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.collectors import Collector, MultiSyncCollector
+from torchrl.envs import EnvBase, StepCounter
+from tqdm import tqdm
+
+from kinet_rl.data.policy import (
+    EPISODE_ID,
+    STEP_COUNT,
+    EpisodeSeeding,
+    RandomPushPolicy,
+    read_workspace_half_size,
+)
+from kinet_rl.data.storage import FORMAT_VERSION, METADATA_FILE, EpisodeWriter, read_json
+from kinet_rl.keys import ACTION, OBJECT_POS, OBJECT_YAW, PIXELS, UNSTABLE
+
+logger = logging.getLogger(__name__)
+
+VERSIONED_PACKAGES = ("kinet_rl", "torch", "torchrl", "tensordict", "mujoco", "dm-control", "numpy")
+DEFAULT_SPLITS = {"train": 0.8, "val": 0.1, "test": 0.1}
+
+
+def seeded_env(
+    env_fn: Callable[[], EnvBase], seed: int, first_episode: int, episode_stride: int
+) -> EnvBase:
+    """Builds ``env_fn()`` with an :class:`EpisodeSeeding` transform appended (picklable)."""
+    env = env_fn()
+    env.append_transform(EpisodeSeeding(seed, first_episode, episode_stride))
+    return env
+
+
+def episode_length_of(env: EnvBase) -> int:
+    """Returns ``max_steps`` of the env's ``StepCounter`` (the number of pushes per episode)."""
+    transforms = getattr(env, "transform", [])
+    for transform in transforms if hasattr(transforms, "__iter__") else [transforms]:
+        if isinstance(transform, StepCounter) and transform.max_steps is not None:
+            return int(transform.max_steps)
+    raise ValueError("The env needs a StepCounter(max_steps=T): episodes must have T pushes.")
+
+
+def split_ranges(num_episodes: int, splits: Mapping[str, float]) -> dict[str, list[int]]:
+    """Assigns contiguous episode ranges [start, stop) to splits by cumulative fraction."""
+    if abs(sum(splits.values()) - 1.0) > 1e-6 or min(splits.values()) < 0:
+        raise ValueError(f"Split fractions must be >= 0 and sum to 1, got {dict(splits)}.")
+    ranges, start, cumulative = {}, 0, 0.0
+    for name, fraction in splits.items():
+        cumulative += fraction
+        stop = min(num_episodes, round(cumulative * num_episodes))
+        ranges[name] = [start, stop]
+        start = stop
+    ranges[name][1] = num_episodes
+    return ranges
+
+
+def package_versions() -> dict[str, str]:
+    """Versions of the packages that shape the data, plus Python's."""
+    versions = {"python": platform.python_version()}
+    for name in VERSIONED_PACKAGES:
+        try:
+            versions[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions
+
+
+def assemble_episode(rows: TensorDictBase, episode_length: int) -> TensorDictBase | None:
+    """Turns one episode's transitions [T] into stored arrays, or None if it must be discarded.
+
+    An episode is discarded when the simulation went unstable or it ended before T pushes.
+    """
+    rows = rows[rows.get(STEP_COUNT).reshape(-1).argsort()]
+    steps = rows.get(STEP_COUNT).reshape(-1)
+    if len(rows) != episode_length or not torch.equal(steps, torch.arange(episode_length)):
+        return None
+    if rows.get(("next", UNSTABLE)).any() or rows.get(UNSTABLE).any():
+        return None
+    last = rows[-1]
+    return TensorDict(
+        {
+            "pixels": torch.cat([rows.get(PIXELS), last.get(("next", PIXELS))[None]]),
+            "action": rows.get(ACTION),
+            "object_pos": torch.cat([rows.get(OBJECT_POS), last.get(("next", OBJECT_POS))[None]]),
+            "object_yaw": torch.cat([rows.get(OBJECT_YAW), last.get(("next", OBJECT_YAW))[None]]),
+            "source_episode": rows.get(EPISODE_ID)[0, 0],
+        }
+    )
+
+
+class EpisodeAssembler:
+    """Groups streamed transitions by episode and releases finished episodes in index order."""
+
+    def __init__(self, first_episode: int, episode_length: int) -> None:
+        self.next_episode = first_episode
+        self.episode_length = episode_length
+        self._pending: dict[int, list[TensorDictBase]] = {}
+        self._finished: dict[int, TensorDictBase | None] = {}
+
+    def add(self, batch: TensorDictBase) -> None:
+        """Adds a collector batch of any shape."""
+        batch = batch.reshape(-1)
+        ids = batch.get(EPISODE_ID).reshape(-1)
+        done = batch.get(("next", "done")).reshape(-1)
+        for episode in ids.unique().tolist():
+            mask = ids == episode
+            if episode < self.next_episode or episode in self._finished:
+                continue  # already accounted for (resumed run, or a replayed reset)
+            self._pending.setdefault(episode, []).append(batch[mask])
+            if done[mask].any():
+                rows = torch.cat(self._pending.pop(episode))
+                self._finished[episode] = assemble_episode(rows, self.episode_length)
+
+    def pop_ready(self) -> list[tuple[int, TensorDictBase | None]]:
+        """Returns (index, episode or None if discarded) for the contiguous finished prefix."""
+        ready = []
+        while self.next_episode in self._finished:
+            ready.append((self.next_episode, self._finished.pop(self.next_episode)))
+            self.next_episode += 1
+        return ready
+
+
+def make_collector(
+    env_fn: Callable[[], EnvBase],
+    policy: RandomPushPolicy,
+    seed: int,
+    first_episode: int,
+    num_workers: int,
+    episode_length: int,
+) -> Collector | MultiSyncCollector:
+    """One ``Collector`` (1 worker, in process) or a ``MultiSyncCollector`` of worker processes."""
+    env_fns = [
+        functools.partial(seeded_env, env_fn, seed, first_episode + w, num_workers)
+        for w in range(num_workers)
+    ]
+    if num_workers == 1:
+        return Collector(
+            env_fns[0],
+            policy,
+            frames_per_batch=episode_length,
+            total_frames=-1,
+            auto_register_policy_transforms=False,
+        )
+    return MultiSyncCollector(
+        env_fns,
+        policy,
+        frames_per_batch=episode_length * num_workers,
+        total_frames=-1,
+        auto_register_policy_transforms=False,
+    )
+
+
+def collect_dataset(
+    env_fn: Callable[[], EnvBase],
+    env_config: Mapping[str, Any],
+    root: str | Path = "data",
+    name: str = "blocks_top64",
+    num_episodes: int = 200,
+    seed: int = 0,
+    num_workers: int = 2,
+    chunk_episodes: int = 16,
+    splits: Mapping[str, float] | None = None,
+    policy: Mapping[str, Any] | None = None,
+    workspace_half_size: float | None = None,
+    max_discard_fraction: float = 0.5,
+    progress: bool = True,
+) -> Path:
+    """Collects ``num_episodes`` random-push episodes into ``<root>/<name>``; resumes if partial.
+
+    Episode ``i`` of the run is fully determined by ``(seed, i)``: the same seed gives the same
+    dataset for any ``num_workers``, and an interrupted run continues from its last committed
+    chunk. Unstable episodes are discarded, counted, and replaced by later ones.
+
+    Args:
+        env_fn: picklable zero-argument env factory (e.g. ``functools.partial(make_env, ...)``).
+        env_config: the env's settings, recorded in the metadata and checked by ``load_dataset``.
+        root: folder holding datasets (relative paths are relative to the working directory).
+        name: dataset folder name.
+        num_episodes: stable episodes to keep.
+        seed: seed of the run.
+        num_workers: env worker processes (1 collects in this process).
+        chunk_episodes: episodes written per commit (the work lost to an interruption).
+        splits: fractions per split name, assigned as contiguous episode ranges.
+        policy: keyword arguments of :class:`RandomPushPolicy` (without the workspace size).
+        workspace_half_size: metres; read from the env when None.
+        max_discard_fraction: abort if more than this fraction of episodes is unstable.
+        progress: show a tqdm progress bar.
+
+    Returns:
+        The dataset folder.
+    """
+    path = Path(root) / name
+    if (path / METADATA_FILE).exists():
+        logger.info("Dataset %s is already complete; nothing to collect.", path)
+        return path
+    if num_episodes < 1 or num_workers < 1 or chunk_episodes < 1:
+        raise ValueError("num_episodes, num_workers and chunk_episodes must all be >= 1.")
+    splits = dict(DEFAULT_SPLITS if splits is None else splits)
+    ranges = split_ranges(num_episodes, splits)
+    probe = env_fn()
+    try:
+        episode_length = episode_length_of(probe)
+        image_size = int(probe.observation_spec[PIXELS].shape[-2])
+        num_objects = int(probe.observation_spec[OBJECT_POS].shape[-2])
+        if workspace_half_size is None:
+            workspace_half_size = read_workspace_half_size(probe)
+    finally:
+        probe.close()
+    push_policy = RandomPushPolicy(workspace_half_size, **(policy or {}))
+    settings = {
+        "env": dict(env_config),
+        "seed": seed,
+        "num_episodes": num_episodes,
+        "episode_length": episode_length,
+        "image_size": image_size,
+        "num_objects": num_objects,
+        "workspace_half_size": workspace_half_size,
+        "policy": dict(policy or {}),
+        "splits": splits,
+    }
+    writer = EpisodeWriter(path, num_episodes, episode_length, image_size, num_objects, settings)
+    assembler = EpisodeAssembler(writer.processed, episode_length)
+    discarded, buffer = writer.discarded, []
+    collector = make_collector(
+        env_fn, push_policy, seed, writer.processed, num_workers, episode_length
+    )
+    bar = tqdm(total=num_episodes, initial=writer.committed, desc=name, disable=not progress)
+    start = time.perf_counter()
+    try:
+        for batch in collector:
+            assembler.add(batch)
+            for index, episode in assembler.pop_ready():
+                if episode is None:
+                    discarded += 1
+                    continue
+                buffer.append(episode)
+                full = writer.committed + len(buffer) == num_episodes
+                if len(buffer) == chunk_episodes or full:
+                    writer.commit(torch.stack(buffer), index + 1, discarded)
+                    bar.update(len(buffer))
+                    buffer = []
+                if full:
+                    break
+            if writer.committed == num_episodes:
+                break
+            if discarded > max(10, max_discard_fraction * assembler.next_episode):
+                raise RuntimeError(
+                    f"{discarded} of {assembler.next_episode} episodes went unstable; check the "
+                    "env's physics settings (kept data so far is in place and will resume)."
+                )
+    finally:
+        collector.shutdown()
+        bar.close()
+    writer.finalize(
+        {
+            "format_version": FORMAT_VERSION,
+            "complete": True,
+            "name": name,
+            **settings,
+            "splits": ranges,
+            "split_fractions": splits,
+            "num_workers": num_workers,
+            "discarded_unstable": discarded,
+            "processed_episodes": writer.processed,
+            "versions": package_versions(),
+            "collection_seconds_last_run": time.perf_counter() - start,
+        }
+    )
+    logger.info("Dataset %s complete: %s", path, read_json(path / METADATA_FILE)["splits"])
+    return path

@@ -1,0 +1,205 @@
+"""Fast random access to collected push datasets: transitions and short sequences."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import torch
+from tensordict import TensorDict
+
+from kinet_rl.data.storage import (
+    COLLECT_HINT,
+    EPISODES_DIR,
+    FORMAT_VERSION,
+    METADATA_FILE,
+    PROGRESS_FILE,
+    DatasetCorruptError,
+    DatasetIncompleteError,
+    DatasetMismatchError,
+    DatasetNotFoundError,
+    check_array_files,
+    episode_array_specs,
+    read_json,
+)
+from kinet_rl.keys import ACTION, EPISODE, OBJECT_POS, PIXELS, PIXELS_0, STEP
+
+logger = logging.getLogger(__name__)
+
+ALL_SPLITS = "all"
+
+
+def _check_expectations(path: Path, metadata: Mapping[str, Any], expect: Mapping[str, Any]) -> None:
+    env = metadata["env"]
+    recorded = {**env, **{k: metadata[k] for k in ("image_size", "num_objects") if k in metadata}}
+    unknown = sorted(set(expect) - set(recorded))
+    if unknown:
+        raise ValueError(
+            f"expect has keys {unknown} that the dataset does not record; known: {sorted(recorded)}."
+        )
+    wrong = {k: v for k, v in expect.items() if recorded[k] != v}
+    if wrong:
+        have = ", ".join(f"{k}={recorded[k]!r}" for k in wrong)
+        want = ", ".join(f"{k}={v!r}" for k, v in wrong.items())
+        overrides = " ".join(f"env.{k}={v}" for k, v in wrong.items())
+        raise DatasetMismatchError(
+            f"Dataset {path} has {have} but the caller expects {want}. Collect a matching "
+            f"dataset (e.g. `python -m kinet_rl.collect {overrides} data.name=<new name>`) "
+            "or point to one that matches."
+        )
+
+
+def _rows(stored: torch.Tensor) -> torch.Tensor:
+    """Plain-tensor 2-D view [E * T', D] of a memmapped [E, T', ...] array (no copy)."""
+    return stored.as_subclass(torch.Tensor).flatten(2).flatten(0, 1)
+
+
+class PushDataset:
+    """Random-push transitions of one split, sampled by fancy indexing into memmapped tensors.
+
+    Args:
+        path: dataset folder ``<root>/<name>`` written by :func:`collect_dataset`.
+        split: ``"train"``, ``"val"``, ``"test"`` (or another recorded split), or ``"all"``.
+        expect: recorded settings the caller relies on, e.g. ``{"image_size": 64,
+            "camera": "top", "task": "blocks"}``; any difference raises
+            :class:`DatasetMismatchError`.
+    """
+
+    def __init__(
+        self, path: str | Path, split: str = "train", expect: Mapping[str, Any] | None = None
+    ) -> None:
+        self.path = path = Path(path)
+        if not (path / METADATA_FILE).exists():
+            if (path / PROGRESS_FILE).exists():
+                progress = read_json(path / PROGRESS_FILE)
+                raise DatasetIncompleteError(
+                    f"Dataset {path} is partial ({progress.get('committed')}/"
+                    f"{progress.get('num_episodes')} episodes) and not marked complete. Rerun the "
+                    "collect command that created it, with the same settings, to resume it."
+                )
+            raise DatasetNotFoundError(f"No dataset at {path}. Collect it with: {COLLECT_HINT}")
+        self.metadata = metadata = read_json(path / METADATA_FILE)
+        if metadata.get("format_version") != FORMAT_VERSION or not metadata.get("complete"):
+            raise DatasetCorruptError(
+                f"{path / METADATA_FILE} has format {metadata.get('format_version')} "
+                f"(complete={metadata.get('complete')}); this kinet_rl reads format "
+                f"{FORMAT_VERSION}. Collect it again: {COLLECT_HINT}"
+            )
+        if expect:
+            _check_expectations(path, metadata, expect)
+        splits = {**metadata["splits"], ALL_SPLITS: [0, metadata["num_episodes"]]}
+        if split not in splits:
+            raise ValueError(f"Unknown split {split!r}; {path} has {sorted(splits)}.")
+        self.split = split
+        self.episode_length = metadata["episode_length"]
+        self.image_size = metadata["image_size"]
+        self.num_objects = metadata["num_objects"]
+        specs = episode_array_specs(self.episode_length, self.image_size, self.num_objects)
+        check_array_files(path, metadata["num_episodes"], specs)
+        stored = TensorDict.load_memmap(path / EPISODES_DIR)
+        # Row views of the memory maps, indexed with index_select: one row per frame or push
+        # (about 9x faster than advanced indexing of the [E, T+1, H, W, 3] tensor).
+        self._frames = _rows(stored["pixels"])  # [E * (T+1), H * W * 3]
+        self._actions = _rows(stored["action"])  # [E * T, 4]
+        self._object_pos = _rows(stored["object_pos"])  # [E * (T+1), N * 2]
+        self.episode_start, self.episode_stop = splits[split]
+        self.num_episodes = self.episode_stop - self.episode_start
+        if self.num_episodes < 1:
+            raise ValueError(f"Split {split!r} of {path} holds no episodes.")
+
+    def __len__(self) -> int:
+        """Number of transitions in the split."""
+        return self.num_episodes * self.episode_length
+
+    def transitions(self, episode: torch.Tensor, step: torch.Tensor) -> TensorDict:
+        """Transitions at dataset episode indices ``episode`` [B] and push indices ``step`` [B].
+
+        Returns:
+            TensorDict [B]: ``pixels_0``, ``pixels``, (``next``, ``pixels``) uint8 [B, H, W, 3];
+            ``action`` [B, 4]; ``object_pos``, (``next``, ``object_pos``) [B, N, 2];
+            ``episode``, ``step`` int64 [B].
+        """
+        batch, h, n = len(episode), self.image_size, self.num_objects
+        times = torch.stack([torch.zeros_like(step), step, step + 1], dim=1)  # [B, 3]
+        rows = self._frame_rows(episode[:, None], times)  # [B, 3]
+        frames = self._frames.index_select(0, rows.reshape(-1)).view(batch, 3, h, h, 3)
+        pos = self._object_pos.index_select(0, rows[:, 1:].reshape(-1)).view(batch, 2, n, 2)
+        return TensorDict(
+            {
+                PIXELS_0: frames[:, 0],
+                PIXELS: frames[:, 1],
+                ACTION: self._actions.index_select(0, episode * self.episode_length + step),
+                OBJECT_POS: pos[:, 0],
+                EPISODE: episode,
+                STEP: step,
+                "next": {PIXELS: frames[:, 2], OBJECT_POS: pos[:, 1]},
+            },
+            batch_size=[batch],
+        )
+
+    def _frame_rows(self, episode: torch.Tensor, time: torch.Tensor) -> torch.Tensor:
+        """Row index of frame ``time`` of ``episode`` in the flattened frame arrays."""
+        return episode * (self.episode_length + 1) + time
+
+    def _random_episodes(self, batch_size: int, generator: torch.Generator | None) -> torch.Tensor:
+        offsets = torch.randint(self.num_episodes, (batch_size,), generator=generator)
+        return self.episode_start + offsets
+
+    def sample(self, batch_size: int, generator: torch.Generator | None = None) -> TensorDict:
+        """Samples ``batch_size`` transitions uniformly from the split (see :meth:`transitions`)."""
+        episode = self._random_episodes(batch_size, generator)
+        step = torch.randint(self.episode_length, (batch_size,), generator=generator)
+        return self.transitions(episode, step)
+
+    def sample_sequences(
+        self, batch_size: int, length: int, generator: torch.Generator | None = None
+    ) -> TensorDict:
+        """Samples ``batch_size`` windows of ``length`` consecutive pushes.
+
+        Returns:
+            TensorDict [B]: ``pixels`` uint8 [B, L+1, H, W, 3] (frames before each push and after
+            the last), ``action`` [B, L, 4], ``object_pos`` [B, L+1, N, 2], ``pixels_0``
+            [B, H, W, 3] (the episode's first frame), ``episode`` and ``step`` (first push) [B].
+        """
+        if not 1 <= length <= self.episode_length:
+            raise ValueError(f"length must lie in [1, {self.episode_length}], got {length}.")
+        episode = self._random_episodes(batch_size, generator)
+        step = torch.randint(self.episode_length - length + 1, (batch_size,), generator=generator)
+        h, n = self.image_size, self.num_objects
+        times = step[:, None] + torch.arange(length + 1)  # [B, L+1]
+        rows = self._frame_rows(episode[:, None], times).reshape(-1)  # [B * (L+1)]
+        first_rows = self._frame_rows(episode, torch.zeros_like(episode))  # [B]
+        push_rows = (episode[:, None] * self.episode_length + times[:, :-1]).reshape(-1)
+        return TensorDict(
+            {
+                PIXELS: self._frames.index_select(0, rows).view(batch_size, length + 1, h, h, 3),
+                ACTION: self._actions.index_select(0, push_rows).view(batch_size, length, 4),
+                OBJECT_POS: self._object_pos.index_select(0, rows).view(
+                    batch_size, length + 1, n, 2
+                ),
+                PIXELS_0: self._frames.index_select(0, first_rows).view(batch_size, h, h, 3),
+                EPISODE: episode,
+                STEP: step,
+            },
+            batch_size=[batch_size],
+        )
+
+    def batches(
+        self, batch_size: int, shuffle: bool = True, generator: torch.Generator | None = None
+    ) -> Iterator[TensorDict]:
+        """Iterates once over every transition of the split (the last batch may be smaller)."""
+        count = len(self)
+        order = torch.randperm(count, generator=generator) if shuffle else torch.arange(count)
+        for chunk in order.split(batch_size):
+            episode = self.episode_start + chunk // self.episode_length
+            step = chunk % self.episode_length
+            yield self.transitions(episode, step)
+
+
+def load_dataset(
+    path: str | Path, split: str = "train", expect: Mapping[str, Any] | None = None
+) -> PushDataset:
+    """Opens a complete dataset's split; see :class:`PushDataset` for the arguments and errors."""
+    return PushDataset(path, split=split, expect=expect)

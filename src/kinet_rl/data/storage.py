@@ -1,0 +1,185 @@
+"""On-disk episode storage: memory-mapped arrays, atomic progress and completion records.
+
+Layout of ``<root>/<name>/``::
+
+    episodes/          tensordict memmap (TensorDict.memmap_like), batch [E]:
+      pixels.memmap          uint8 [E, T+1, H, W, 3]  each frame stored once
+      action.memmap          float32 [E, T, 4]
+      object_pos.memmap      float32 [E, T+1, N, 2]
+      object_yaw.memmap      float32 [E, T+1, N]
+      source_episode.memmap  int64 [E]  episode index within the collection run
+      meta.json              tensordict's own shapes and dtypes
+    progress.json      committed episodes, processed (kept + discarded) source episodes, settings
+    metadata.json      written last, atomically: its presence marks the dataset complete
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+
+from kinet_rl.atomic import atomic_write_json
+
+logger = logging.getLogger(__name__)
+
+EPISODES_DIR = "episodes"
+PROGRESS_FILE = "progress.json"
+METADATA_FILE = "metadata.json"
+FORMAT_VERSION = 1
+COLLECT_HINT = "python -m kinet_rl.collect [+exp=<experiment>] data.root=<root> data.name=<name>"
+
+
+class DatasetError(Exception):
+    """Base class of dataset errors; the message names the problem and the fix."""
+
+
+class DatasetNotFoundError(DatasetError):
+    """No dataset exists at the given path."""
+
+
+class DatasetIncompleteError(DatasetError):
+    """The dataset's collection stopped before it was marked complete."""
+
+
+class DatasetCorruptError(DatasetError):
+    """The dataset's files are unreadable, truncated or inconsistent."""
+
+
+class DatasetMismatchError(DatasetError):
+    """The dataset differs from what the caller expects, or from the settings of a resumed run."""
+
+
+def read_json(path: Path) -> dict[str, Any]:
+    """Reads a JSON record, raising :class:`DatasetCorruptError` if it cannot be parsed."""
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except (OSError, json.JSONDecodeError) as err:
+        raise DatasetCorruptError(
+            f"Cannot read {path} ({err}). Delete {path.parent} and collect it again: {COLLECT_HINT}"
+        ) from err
+
+
+def episode_array_specs(
+    episode_length: int, image_size: int, num_objects: int
+) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
+    """Per-episode shape (without the leading E) and dtype of every stored array."""
+    t, h, n = episode_length, image_size, num_objects
+    return {
+        "pixels": ((t + 1, h, h, 3), torch.uint8),
+        "action": ((t, 4), torch.float32),
+        "object_pos": ((t + 1, n, 2), torch.float32),
+        "object_yaw": ((t + 1, n), torch.float32),
+        "source_episode": ((), torch.int64),
+    }
+
+
+def check_array_files(path: Path, num_episodes: int, specs: Mapping[str, Any]) -> None:
+    """Raises :class:`DatasetCorruptError` unless every array file has its expected size."""
+    for name, (shape, dtype) in specs.items():
+        file = path / EPISODES_DIR / f"{name}.memmap"
+        expected = num_episodes * torch.Size(shape).numel() * dtype.itemsize
+        size = file.stat().st_size if file.exists() else None
+        if size != expected:
+            found = "is missing" if size is None else f"has {size} bytes"
+            raise DatasetCorruptError(
+                f"{file} {found}, expected {expected} bytes: the dataset is truncated or "
+                f"corrupt. Delete {path} and collect it again: {COLLECT_HINT}"
+            )
+
+
+class EpisodeWriter:
+    """Appends fixed-length episodes, in order, to memory-mapped storage; resumable.
+
+    Args:
+        path: dataset folder ``<root>/<name>``.
+        num_episodes: episodes the finished dataset holds (storage is preallocated, sparse).
+        episode_length: pushes per episode T.
+        image_size: frame side H = W.
+        num_objects: objects per scene N.
+        settings: JSON-able collection settings; a resumed run must present the same ones.
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        num_episodes: int,
+        episode_length: int,
+        image_size: int,
+        num_objects: int,
+        settings: Mapping[str, Any],
+    ) -> None:
+        self.path = Path(path)
+        self.num_episodes = num_episodes
+        self.settings = dict(settings)
+        self.specs = episode_array_specs(episode_length, image_size, num_objects)
+        progress_file = self.path / PROGRESS_FILE
+        if progress_file.exists():
+            progress = read_json(progress_file)
+            if progress.get("settings") != json.loads(json.dumps(self.settings)):
+                raise DatasetMismatchError(
+                    f"{self.path} holds a partial collection started with other settings "
+                    f"({progress.get('settings')}) than now ({self.settings}). Rerun with the "
+                    f"original settings to resume, or delete {self.path} to start over."
+                )
+            check_array_files(self.path, num_episodes, self.specs)
+            self.storage = TensorDict.load_memmap(self.path / EPISODES_DIR)
+            self.committed = int(progress["committed"])
+            self.processed = int(progress["processed"])
+            self.discarded = int(progress["discarded_unstable"])
+            logger.info("Resuming %s at %d/%d episodes.", self.path, self.committed, num_episodes)
+        else:
+            self.path.mkdir(parents=True, exist_ok=True)
+            template = TensorDict(
+                {
+                    name: torch.zeros((1, *shape), dtype=dtype).expand(num_episodes, *shape)
+                    for name, (shape, dtype) in self.specs.items()
+                },
+                batch_size=[num_episodes],
+            )
+            self.storage = template.memmap_like(self.path / EPISODES_DIR)
+            self.committed = self.processed = self.discarded = 0
+            self._write_progress()
+
+    def _write_progress(self) -> None:
+        atomic_write_json(
+            self.path / PROGRESS_FILE,
+            {
+                "committed": self.committed,
+                "processed": self.processed,
+                "discarded_unstable": self.discarded,
+                "num_episodes": self.num_episodes,
+                "settings": self.settings,
+            },
+        )
+
+    def commit(self, episodes: TensorDictBase, processed: int, discarded: int) -> None:
+        """Writes ``episodes`` [k] after the committed ones, syncs, then records progress.
+
+        Args:
+            episodes: batch [k] with the stored arrays' keys.
+            processed: source episodes accounted for (kept or discarded) after this commit.
+            discarded: unstable source episodes discarded so far.
+        """
+        stop = self.committed + episodes.shape[0]
+        if stop > self.num_episodes:
+            raise ValueError(f"Commit of {episodes.shape[0]} episodes overflows {self.num_episodes}.")
+        self.storage[self.committed : stop] = episodes.select(*self.specs)
+        for name in self.specs:
+            with open(self.path / EPISODES_DIR / f"{name}.memmap", "rb+") as f:
+                os.fsync(f.fileno())
+        self.committed, self.processed, self.discarded = stop, processed, discarded
+        self._write_progress()
+
+    def finalize(self, metadata: Mapping[str, Any]) -> None:
+        """Marks the dataset complete by writing ``metadata.json`` atomically."""
+        if self.committed != self.num_episodes:
+            raise RuntimeError(f"finalize() at {self.committed}/{self.num_episodes} episodes.")
+        atomic_write_json(self.path / METADATA_FILE, metadata)

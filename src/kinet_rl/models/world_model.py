@@ -1,0 +1,228 @@
+"""KINet world model: keypoint detector, reconstructor and interaction net behind TensorDict keys.
+
+Reference: KINet, Rezazadeh et al., RA-L 2023, Sec. 3.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+from tensordict import TensorDictBase
+from torch import Tensor, nn
+
+from kinet_rl.atomic import CheckpointError, atomic_torch_save, safe_torch_load
+from kinet_rl.keys import ACTION, KP_FEAT, KP_NODE_EMB, KP_POS, PIXELS, PIXELS_0
+from kinet_rl.models.interaction import GraphPrediction, KeypointInteractionNet
+from kinet_rl.models.keypoints import KeypointDetector, KeypointReconstructor, pixels_to_input
+
+log = logging.getLogger(__name__)
+
+CHECKPOINT_FORMAT = "kinet_rl.KINetWorldModel/1"
+
+
+@dataclass
+class TransitionOutputs:
+    """Everything the KINet losses need for a batch of ``B`` transitions ``(I_0, I_t, u, I_t+1)``.
+
+    Attributes:
+        pos: ``[B, K, 2]`` detected ``x_t`` (with gradient to the detector).
+        next_pos: ``[B, K, 2]`` detected ``x_t+1`` (with gradient to the detector).
+        next_feat: ``[B, K, D]`` detected ``phi_t+1``.
+        reconstruction: ``[2B, H, W, 3]`` ``f_rec`` of ``I_t`` then ``I_t+1`` (centred space).
+        target: ``[2B, H, W, 3]`` ``I_t`` then ``I_t+1`` in the same centred space.
+        prediction: Interaction-net output from the detached ``(x_t, phi_t)`` and the action.
+    """
+
+    pos: Tensor
+    next_pos: Tensor
+    next_feat: Tensor
+    reconstruction: Tensor
+    target: Tensor
+    prediction: GraphPrediction
+
+
+class KINetWorldModel(nn.Module):
+    """Keypoint detector ``f_kp``, reconstructor ``f_rec`` and interaction net ``f_fwd``.
+
+    Keypoints and features fed to the interaction net are detached, so forward-model losses never
+    reach the detector (paper Sec. 3.5, after Minderer et al. 2019).
+
+    Keys:
+        :meth:`forward` reads ``ACTION`` ``[*B, 4]`` and either ``KP_POS`` ``[*B, K, 2]`` +
+        ``KP_FEAT`` ``[*B, K, D]`` or, if those are absent, ``PIXELS`` ``[*B, H, W, 3]`` (then
+        writes ``KP_POS``/``KP_FEAT``). It writes ``KP_NODE_EMB`` ``[*B, K, E]`` and the
+        predictions ``("next", KP_POS)``, ``("next", KP_FEAT)`` (appearance carried over) and
+        ``("next", KP_NODE_EMB)``.
+
+    Args:
+        num_keypoints: ``K`` detected keypoints.
+        feat_dim: ``D`` of each keypoint's visual feature.
+        channels: Detector/reconstructor conv width.
+        blob_std: Gaussian blob std of the transport step, in ``[-1, 1]`` units.
+        embed_dim: ``E`` of graph node/edge embeddings.
+        hidden_dim: Hidden units of the graph MLPs.
+        num_hidden: Hidden layers of the graph MLPs.
+        num_rounds: ``L`` message-passing rounds.
+        deterministic: Ablation: fully connected graph and no KL.
+    """
+
+    def __init__(
+        self,
+        num_keypoints: int = 6,
+        feat_dim: int = 16,
+        channels: int = 32,
+        blob_std: float = 0.1,
+        embed_dim: int = 64,
+        hidden_dim: int = 128,
+        num_hidden: int = 3,
+        num_rounds: int = 3,
+        deterministic: bool = False,
+    ) -> None:
+        super().__init__()
+        self.config: dict[str, Any] = {
+            "num_keypoints": num_keypoints,
+            "feat_dim": feat_dim,
+            "channels": channels,
+            "blob_std": blob_std,
+            "embed_dim": embed_dim,
+            "hidden_dim": hidden_dim,
+            "num_hidden": num_hidden,
+            "num_rounds": num_rounds,
+            "deterministic": deterministic,
+        }
+        self.detector = KeypointDetector(num_keypoints, feat_dim, channels)
+        self.reconstructor = KeypointReconstructor(channels, blob_std)
+        self.interaction = KeypointInteractionNet(
+            feat_dim, embed_dim, hidden_dim, num_hidden, num_rounds, deterministic
+        )
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """Predicts the next keypoints for ``ACTION`` (see the class ``Keys:``)."""
+        pos = tensordict.get(KP_POS, None)
+        feat = tensordict.get(KP_FEAT, None)
+        if pos is None or feat is None:
+            pixels = tensordict.get(PIXELS, None)
+            if pixels is None:
+                raise KeyError(
+                    f"KINetWorldModel needs {KP_POS!r} and {KP_FEAT!r} or {PIXELS!r} in the input; "
+                    "add a KeypointTransform to the env or pass images."
+                )
+            pos, feat = self.detector(pixels)
+            tensordict.set(KP_POS, pos)
+            tensordict.set(KP_FEAT, feat)
+        prediction = self.interaction(pos.detach(), feat.detach(), tensordict.get(ACTION))
+        tensordict.set(KP_NODE_EMB, prediction.nodes)
+        tensordict.set(("next", *KP_POS), prediction.next_pos)
+        tensordict.set(("next", *KP_FEAT), feat.detach())
+        tensordict.set(("next", *KP_NODE_EMB), prediction.next_nodes)
+        return tensordict
+
+    def transition(self, tensordict: TensorDictBase) -> TransitionOutputs:
+        """Runs detector, reconstructor and interaction net on a batch of transitions.
+
+        Args:
+            tensordict: ``[B]`` batch with ``PIXELS_0``, ``PIXELS``, ``ACTION`` and
+                ``("next", PIXELS)``; images ``[B, H, W, 3]`` uint8 or float in ``[0, 1]``.
+        """
+        try:
+            first = tensordict.get(PIXELS_0)
+            current = tensordict.get(PIXELS)
+            following = tensordict.get(("next", PIXELS))
+            action = tensordict.get(ACTION)
+        except KeyError as err:
+            raise KeyError(
+                f"A KINet training batch needs {PIXELS_0!r}, {PIXELS!r}, {ACTION!r} and "
+                f"('next', {PIXELS!r}); missing: {err}."
+            ) from err
+        if not first.shape == current.shape == following.shape or first.dim() != 4:
+            raise ValueError(
+                "pixels_0, pixels and ('next', 'pixels') must share one [B, H, W, 3] shape; got "
+                f"{tuple(first.shape)}, {tuple(current.shape)}, {tuple(following.shape)}."
+            )
+        batch = first.shape[0]
+        enc = self.detector.encode(torch.cat([first, current, following]))  # one pass: 3B frames
+        pos_0, pos, next_pos = enc.pos.split(batch)
+        feat, next_feat = enc.feat[batch:].split(batch)
+        source = type(enc)(
+            pos=pos_0.repeat(2, 1, 1),
+            feat=enc.feat[:batch].repeat(2, 1, 1),
+            fine=enc.fine[:batch].repeat(2, 1, 1, 1),
+            coarse=enc.coarse[:batch].repeat(2, 1, 1, 1),
+        )
+        reconstruction = self.reconstructor(source, source.pos, torch.cat([pos, next_pos]))
+        target = pixels_to_input(torch.cat([current, following])).permute(0, 2, 3, 1)
+        prediction = self.interaction(pos.detach(), feat.detach(), action)
+        return TransitionOutputs(pos, next_pos, next_feat, reconstruction, target, prediction)
+
+    @torch.no_grad()
+    def predict_pixels(self, pixels_0: Tensor, pos: Tensor) -> Tensor:
+        """Renders images ``f_rec(I_0, x_0, pos)``, e.g. the predicted future frame.
+
+        Args:
+            pixels_0: ``[B, H, W, 3]`` initial frames.
+            pos: ``[B, K, 2]`` keypoints of the frames to render (e.g. ``("next", KP_POS)``).
+
+        Returns:
+            ``[B, H, W, 3]`` float images in ``[0, 1]``.
+        """
+        source = self.detector.encode(pixels_0)
+        return (self.reconstructor(source, source.pos, pos) + 0.5).clamp(0.0, 1.0)
+
+    def save_checkpoint(self, path: str | os.PathLike, config: dict[str, Any] | None = None) -> None:
+        """Atomically writes weights, the constructor config and optional run ``config`` metadata."""
+        state = {
+            "format": CHECKPOINT_FORMAT,
+            "model_config": dict(self.config),
+            "config": dict(config or {}),
+            "state_dict": self.state_dict(),
+        }
+        atomic_torch_save(state, path)
+        log.info("Saved KINet checkpoint to %s", path)
+
+    @classmethod
+    def from_checkpoint(
+        cls, path: str | os.PathLike, expected_config: dict[str, Any] | None = None
+    ) -> KINetWorldModel:
+        """Rebuilds a model saved by :meth:`save_checkpoint` (loaded with ``weights_only=True``).
+
+        Args:
+            path: Checkpoint file.
+            expected_config: Constructor settings the caller relies on; any that differ from the
+                stored ones raise :class:`CheckpointError`.
+
+        Raises:
+            CheckpointError: Missing, corrupt, truncated, foreign or mismatching checkpoint.
+        """
+        state = safe_torch_load(
+            path, ("format", "model_config", "state_dict"), "KINetWorldModel.save_checkpoint"
+        )
+        if state["format"] != CHECKPOINT_FORMAT:
+            raise CheckpointError(
+                f"Checkpoint {path} has format {state['format']!r}, expected {CHECKPOINT_FORMAT!r}; "
+                "re-save it with this kinet_rl version."
+            )
+        stored = state["model_config"]
+        diffs = {
+            key: (value, stored.get(key, "<missing>"))
+            for key, value in (expected_config or {}).items()
+            if stored.get(key, "<missing>") != value
+        }
+        if diffs:
+            detail = ", ".join(f"{k}: expected {e!r}, checkpoint {s!r}" for k, (e, s) in diffs.items())
+            raise CheckpointError(
+                f"Checkpoint {path} does not match the requested model config ({detail}); "
+                "use a checkpoint trained with these settings or change the config to match."
+            )
+        try:
+            model = cls(**stored)
+            model.load_state_dict(state["state_dict"])
+        except (TypeError, RuntimeError) as err:
+            raise CheckpointError(
+                f"Checkpoint {path} holds weights that do not fit its model config ({err}); "
+                "the file was edited or written by an incompatible version, re-save it."
+            ) from err
+        return model

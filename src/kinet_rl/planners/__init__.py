@@ -1,0 +1,12 @@
+"""Planners over any TorchRL model env: GraphMPC (CEM, MPPI) and goal rewards.
+
+Imports neither ``kinet_rl.models`` nor hydra, so any TorchRL pipeline can use it with its own
+world model.
+"""
+
+from __future__ import annotations
+
+from kinet_rl.planners.costs import GoalReward, graph_similarity_reward, keypoint_goal_reward
+from kinet_rl.planners.graph_mpc import GraphMPCPlanner
+
+__all__ = ["GoalReward", "GraphMPCPlanner", "graph_similarity_reward", "keypoint_goal_reward"]

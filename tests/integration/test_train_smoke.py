@@ -1,0 +1,93 @@
+"""End-to-end ``python -m kinet_rl.train +exp=smoke``: outputs, resumption, torchrun DDP (slow)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+from kinet_rl.atomic import CheckpointError
+from kinet_rl.models import KINetWorldModel
+
+pytestmark = pytest.mark.slow
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def run_train(tmp: Path, *overrides: str, launcher: tuple[str, ...] = ("-m",)) -> str:
+    """Runs the smoke experiment with data and run directory in ``tmp``; returns its output."""
+    command = [
+        sys.executable,
+        *launcher,
+        "kinet_rl.train",
+        "+exp=smoke",
+        f"data.root={tmp / 'data'}",
+        "data.generalization=null",
+        f"hydra.run.dir={tmp / 'run'}",
+        *overrides,
+    ]
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "OMP_NUM_THREADS": "1"}
+    result = subprocess.run(command, cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]
+    return result.stdout + result.stderr
+
+
+@pytest.fixture(scope="module")
+def smoke_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    tmp = tmp_path_factory.mktemp("train")
+    output = run_train(tmp)
+    assert "Keypoint accuracy" in output  # the report is printed at the end
+    return tmp
+
+
+def test_run_writes_model_report_images_and_logs(smoke_run: Path) -> None:
+    run = smoke_run / "run"
+    results = json.loads((run / "results.json").read_text())
+    assert results["step"] == 6
+    assert 0.0 <= results["keypoint_accuracy"] <= 1.0
+    assert set(results["forward_error_m"]) == {"1", "3"}
+    assert "| pushes ahead |" in (run / "report.md").read_text()
+    for name in ("keypoints_final.png", "reconstruction_final.png", "keypoints_step000003.png"):
+        assert (run / "images" / name).stat().st_size > 0
+    assert list((run / "logs").rglob("*.csv")), "CSV logger wrote no scalars"
+    model = KINetWorldModel.from_checkpoint(run / "kinet.pt", {"num_keypoints": 6})
+    assert model.detector.num_keypoints == 6
+
+
+def test_rerun_resumes_and_longer_run_continues(smoke_run: Path) -> None:
+    output = run_train(smoke_run, "trainer.steps=9")
+    assert "Resumed" in output and "at step 6" in output
+    assert json.loads((smoke_run / "run" / "results.json").read_text())["step"] == 9
+
+
+def test_other_experiment_in_same_run_dir_is_refused(smoke_run: Path) -> None:
+    command = [
+        sys.executable, "-m", "kinet_rl.train", "+exp=smoke", f"data.root={smoke_run / 'data'}",
+        "data.generalization=null", f"hydra.run.dir={smoke_run / 'run'}", "model.num_keypoints=4",
+    ]  # fmt: skip
+    result = subprocess.run(command, cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert result.returncode != 0
+    assert "belongs to a different experiment" in result.stderr
+    assert "model" in result.stderr
+
+
+def test_mismatched_model_checkpoint_is_refused(smoke_run: Path) -> None:
+    with pytest.raises(CheckpointError, match="num_keypoints"):
+        KINetWorldModel.from_checkpoint(smoke_run / "run" / "kinet.pt", {"num_keypoints": 9})
+
+
+def test_torchrun_two_cpu_processes(tmp_path: Path) -> None:
+    run_train(
+        tmp_path,
+        "device=cpu",
+        launcher=("-m", "torch.distributed.run", "--nproc_per_node=2", "--master_port=29517", "-m"),
+    )
+    results = json.loads((tmp_path / "run" / "results.json").read_text())
+    assert results["world_size"] == 2
+    state = torch.load(tmp_path / "run" / "checkpoints" / "last.pt", weights_only=True)
+    assert state["step"] == 6

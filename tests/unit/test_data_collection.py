@@ -1,0 +1,113 @@
+"""Collection into on-disk datasets with the fake push env: splits, resumption, unstable runs."""
+
+from __future__ import annotations
+
+import functools
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+from tensordict import TensorDict
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from fake_push_env import make_fake_env  # noqa: E402
+
+from kinet_rl.data import (  # noqa: E402
+    DatasetIncompleteError,
+    DatasetMismatchError,
+    collect_dataset,
+    load_dataset,
+    split_ranges,
+)
+from kinet_rl.data.storage import EPISODES_DIR, EpisodeWriter  # noqa: E402
+
+ENV_CONFIG = {"task": "fake", "camera": "top", "image_size": 8}
+
+
+def collect(root: Path, name: str, unstable_prob: float = 0.1, **kwargs) -> Path:
+    env_fn = functools.partial(make_fake_env, image_size=8, max_steps=4, unstable_prob=unstable_prob)
+    settings = {"num_episodes": 10, "num_workers": 1, "chunk_episodes": 3, "seed": 7}
+    settings.update(kwargs)
+    return collect_dataset(env_fn, ENV_CONFIG, root=root, name=name, progress=False, **settings)
+
+
+def stored(path: Path) -> TensorDict:
+    return TensorDict.load_memmap(path / EPISODES_DIR)
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return collect(tmp_path_factory.mktemp("data"), "reference")
+
+
+def test_splits_are_disjoint_and_cover_all_episodes(reference: Path) -> None:
+    covered = []
+    for split in ("train", "val", "test"):
+        data = load_dataset(reference, split)
+        covered += range(data.episode_start, data.episode_stop)
+        episodes = data.sample(64, generator=torch.Generator().manual_seed(0))["episode"]
+        assert episodes.min() >= data.episode_start and episodes.max() < data.episode_stop
+    assert sorted(covered) == list(range(10))
+    assert load_dataset(reference, "train").num_episodes == 8
+
+
+@pytest.mark.parametrize("num_episodes", [1, 3, 7, 10, 8000])
+def test_split_ranges_partition_the_episodes(num_episodes: int) -> None:
+    ranges = split_ranges(num_episodes, {"train": 0.8, "val": 0.1, "test": 0.1})
+    flat = [i for start, stop in ranges.values() for i in range(start, stop)]
+    assert flat == list(range(num_episodes))
+
+
+def test_resume_after_crash_gives_the_uninterrupted_dataset(
+    reference: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    original_commit = EpisodeWriter.commit
+
+    def commit_then_crash(self, *args, **kwargs):
+        original_commit(self, *args, **kwargs)
+        raise KeyboardInterrupt("simulated kill after the first chunk")
+
+    monkeypatch.setattr(EpisodeWriter, "commit", commit_then_crash)
+    with pytest.raises(KeyboardInterrupt):
+        collect(tmp_path, "resumed")
+    with pytest.raises(DatasetIncompleteError, match="3/10 episodes.*resume"):
+        load_dataset(tmp_path / "resumed")
+    monkeypatch.setattr(EpisodeWriter, "commit", original_commit)
+    collect(tmp_path, "resumed")
+    assert (stored(tmp_path / "resumed") == stored(reference)).all()
+    resumed, full = (load_dataset(p).metadata for p in (tmp_path / "resumed", reference))
+    assert resumed["discarded_unstable"] == full["discarded_unstable"]
+
+
+def test_unstable_episodes_are_discarded_and_counted(reference: Path) -> None:
+    metadata = load_dataset(reference).metadata
+    source = stored(reference)["source_episode"].tolist()
+    assert source == sorted(source) and len(set(source)) == 10
+    gaps = source[-1] + 1 - len(source)
+    assert metadata["discarded_unstable"] == gaps > 0
+    assert metadata["processed_episodes"] == source[-1] + 1
+
+
+def test_same_seed_same_data_other_seed_other_data(reference: Path, tmp_path: Path) -> None:
+    again = collect(tmp_path, "again", chunk_episodes=4)
+    other = collect(tmp_path, "other", seed=8, num_episodes=2)
+    assert (stored(again) == stored(reference)).all()
+    assert not torch.equal(stored(other)["pixels"], stored(reference)["pixels"][:2])
+
+
+def test_resume_with_other_settings_is_refused(tmp_path: Path, monkeypatch) -> None:
+    def crash(self, *args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(EpisodeWriter, "commit", crash)
+    with pytest.raises(KeyboardInterrupt):
+        collect(tmp_path, "changed")
+    monkeypatch.undo()
+    with pytest.raises(DatasetMismatchError, match="other settings.*delete"):
+        collect(tmp_path, "changed", seed=99)
+
+
+def test_runaway_instability_aborts(tmp_path: Path) -> None:
+    with pytest.raises(RuntimeError, match="went unstable"):
+        collect(tmp_path, "unstable", unstable_prob=0.9, num_episodes=3)

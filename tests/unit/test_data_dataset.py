@@ -1,0 +1,135 @@
+"""Loading datasets: batch contract, no duplicated frames, refusal of bad datasets."""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from fake_push_env import make_fake_env  # noqa: E402
+
+from kinet_rl.data import (  # noqa: E402
+    DatasetCorruptError,
+    DatasetIncompleteError,
+    DatasetMismatchError,
+    DatasetNotFoundError,
+    collect_dataset,
+    load_dataset,
+)
+from kinet_rl.data.storage import EPISODES_DIR, METADATA_FILE  # noqa: E402
+
+H, T, N = 8, 4, 3
+ENV_CONFIG = {"task": "fake", "camera": "top", "image_size": H}
+
+
+def collect(root: Path, name: str, image_size: int = H, max_steps: int = T, **kwargs) -> Path:
+    env_fn = functools.partial(make_fake_env, image_size=image_size, max_steps=max_steps)
+    config = {**ENV_CONFIG, "image_size": image_size}
+    return collect_dataset(
+        env_fn, config, root=root, name=name, num_workers=1, seed=3, progress=False, **kwargs
+    )
+
+
+@pytest.fixture(scope="module")
+def dataset_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return collect(tmp_path_factory.mktemp("data"), "ds", num_episodes=10, chunk_episodes=5)
+
+
+def test_transition_batch_has_documented_keys_shapes_dtypes(dataset_path: Path) -> None:
+    batch = load_dataset(dataset_path).sample(32, generator=torch.Generator().manual_seed(0))
+    assert batch.batch_size == (32,)
+    for key in ("pixels_0", "pixels", ("next", "pixels")):
+        assert batch[key].shape == (32, H, H, 3) and batch[key].dtype == torch.uint8
+    for key in ("object_pos", ("next", "object_pos")):
+        assert batch[key].shape == (32, N, 2) and batch[key].dtype == torch.float32
+    assert batch["action"].shape == (32, 4) and batch["action"].abs().max() <= 1
+    assert batch["episode"].dtype == batch["step"].dtype == torch.int64
+    assert batch["step"].max() < T
+
+
+def test_transitions_chain_within_episodes(dataset_path: Path) -> None:
+    data = load_dataset(dataset_path, "all")
+    episode = torch.tensor([2, 2, 2])
+    batch = data.transitions(episode, torch.tensor([0, 1, 2]))
+    assert torch.equal(batch["next", "pixels"][:2], batch["pixels"][1:])
+    assert torch.equal(batch["next", "object_pos"][:2], batch["object_pos"][1:])
+    assert torch.equal(batch["pixels_0"], batch["pixels"][:1].expand(3, H, H, 3))
+    moved = (batch["next", "object_pos"] - batch["object_pos"]).abs().sum((-1, -2)) > 0
+    changed = (batch["next", "pixels"] != batch["pixels"]).flatten(1).any(1)
+    assert torch.equal(moved, changed)
+
+
+def test_sequence_batch_shapes_and_consistency(dataset_path: Path) -> None:
+    data = load_dataset(dataset_path, "all")
+    seq = data.sample_sequences(5, 3, generator=torch.Generator().manual_seed(1))
+    assert seq["pixels"].shape == (5, 4, H, H, 3) and seq["action"].shape == (5, 3, 4)
+    assert seq["object_pos"].shape == (5, 4, N, 2) and seq["pixels_0"].shape == (5, H, H, 3)
+    step0 = data.transitions(seq["episode"], seq["step"])
+    assert torch.equal(seq["pixels"][:, 0], step0["pixels"])
+    assert torch.equal(seq["action"][:, 0], step0["action"])
+    with pytest.raises(ValueError, match="length"):
+        data.sample_sequences(2, T + 1)
+
+
+def test_batches_visit_every_transition_once(dataset_path: Path) -> None:
+    data = load_dataset(dataset_path, "train")
+    seen = [
+        (e, s)
+        for b in data.batches(7, generator=torch.Generator().manual_seed(0))
+        for e, s in zip(b["episode"].tolist(), b["step"].tolist(), strict=True)
+    ]
+    assert sorted(seen) == [(e, s) for e in range(8) for s in range(T)]
+
+
+def test_frames_are_stored_once(tmp_path: Path) -> None:
+    height, steps, episodes = 64, 20, 2
+    path = collect(tmp_path, "big", image_size=height, max_steps=steps, num_episodes=episodes)
+    on_disk = sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
+    one_image_per_step = episodes * steps * height * height * 3
+    assert on_disk <= 1.1 * one_image_per_step
+
+
+def test_missing_dataset_names_the_collect_command(tmp_path: Path) -> None:
+    with pytest.raises(DatasetNotFoundError, match="python -m kinet_rl.collect"):
+        load_dataset(tmp_path / "nothing")
+
+
+def test_truncated_and_corrupt_datasets_are_refused(tmp_path: Path) -> None:
+    path = collect(tmp_path, "ds", num_episodes=2)
+    pixels = path / EPISODES_DIR / "pixels.memmap"
+    with open(pixels, "r+b") as f:
+        f.truncate(pixels.stat().st_size // 2)
+    with pytest.raises(DatasetCorruptError, match="truncated or corrupt.*collect"):
+        load_dataset(path)
+    (path / METADATA_FILE).write_text("{not json")
+    with pytest.raises(DatasetCorruptError, match="Cannot read"):
+        load_dataset(path)
+
+
+def test_partial_dataset_is_refused(tmp_path: Path) -> None:
+    path = collect(tmp_path, "ds", num_episodes=2)
+    (path / METADATA_FILE).unlink()
+    with pytest.raises(DatasetIncompleteError, match="partial.*not marked complete"):
+        load_dataset(path)
+
+
+def test_mismatched_dataset_names_the_difference(dataset_path: Path) -> None:
+    with pytest.raises(DatasetMismatchError, match="camera='top'.*camera='side'.*env.camera=side"):
+        load_dataset(dataset_path, expect={"camera": "side", "image_size": H})
+    with pytest.raises(DatasetMismatchError, match="image_size=8.*image_size=64"):
+        load_dataset(dataset_path, expect={"image_size": 64})
+    with pytest.raises(ValueError, match="does not record"):
+        load_dataset(dataset_path, expect={"colour": "red"})
+    assert load_dataset(dataset_path, expect=ENV_CONFIG).image_size == H
+
+
+def test_metadata_records_provenance(dataset_path: Path) -> None:
+    metadata = json.loads((dataset_path / METADATA_FILE).read_text())
+    assert metadata["complete"] and metadata["seed"] == 3 and metadata["num_episodes"] == 10
+    assert {"torch", "torchrl", "tensordict", "kinet_rl"} <= set(metadata["versions"])
+    assert metadata["splits"] == {"train": [0, 8], "val": [8, 9], "test": [9, 10]}

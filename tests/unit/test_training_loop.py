@@ -1,0 +1,99 @@
+"""Trainer: resumption gives the uninterrupted run, NaN stops the run and keeps the checkpoint."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+from tensordict import TensorDict
+from torch import nn
+
+from kinet_rl.atomic import CheckpointError
+from kinet_rl.training import TrainingCheckpoint
+from kinet_rl.training.loggers import make_logger
+from kinet_rl.training.loop import DivergenceError, Trainer, TrainerSettings
+
+
+class LinearData:
+    """Noise-free y = 3x - 1 transitions."""
+
+    def sample(self, batch_size: int, generator: torch.Generator | None = None) -> TensorDict:
+        x = torch.rand(batch_size, 1, generator=generator)
+        return TensorDict({"x": x, "y": 3 * x - 1}, batch_size=[batch_size])
+
+
+class RegressionLoss(nn.Module):
+    """A loss module in the trainer's contract; returns NaN from step ``nan_after`` on."""
+
+    def __init__(self, nan_after: int | None = None) -> None:
+        super().__init__()
+        self.net = nn.Linear(1, 1)
+        self.calls = 0
+        self.nan_after = nan_after
+
+    def forward(self, batch: TensorDict) -> TensorDict:
+        self.calls += self.training
+        loss = (self.net(batch["x"]) - batch["y"]).pow(2).mean()
+        if self.nan_after is not None and self.calls > self.nan_after:
+            loss = loss * float("nan")
+        return TensorDict({"loss_mse": loss}, batch_size=[])
+
+
+def make_trainer(run_dir: Path, steps: int, loss: nn.Module | None = None, seed: int = 0) -> Trainer:
+    torch.manual_seed(seed)
+    settings = TrainerSettings(
+        steps=steps, batch_size=8, lr=0.05, log_every=2, eval_every=4, checkpoint_every=2,
+        val_batches=2,
+    )  # fmt: skip
+    return Trainer(
+        loss or RegressionLoss(),
+        LinearData(),
+        LinearData(),
+        settings,
+        TrainingCheckpoint(run_dir, {"exp": "linear"}),
+        make_logger("csv", run_dir, "linear"),
+    )
+
+
+def test_training_lowers_the_loss(tmp_path: Path) -> None:
+    trainer = make_trainer(tmp_path, steps=0)
+    before = trainer.validate()["val/loss"]
+    trainer = make_trainer(tmp_path / "run", steps=200)
+    after = trainer.fit()["val/loss"]
+    assert after < before / 20
+
+
+def test_resumed_run_equals_uninterrupted_run(tmp_path: Path) -> None:
+    straight = make_trainer(tmp_path / "straight", steps=8)
+    straight.fit()
+    first = make_trainer(tmp_path / "split", steps=4)
+    first.fit()
+    resumed = make_trainer(tmp_path / "split", steps=8, seed=123)  # other init: must be overwritten
+    assert resumed.resume() and resumed.step == 4
+    resumed.fit()
+    for a, b in zip(straight.loss_module.parameters(), resumed.loss_module.parameters(), strict=True):
+        torch.testing.assert_close(a, b)
+
+
+def test_nan_loss_stops_and_keeps_last_good_checkpoint(tmp_path: Path) -> None:
+    trainer = make_trainer(tmp_path, steps=20, loss=RegressionLoss(nan_after=5))
+    with pytest.raises(DivergenceError, match="not finite at step 5"):
+        trainer.fit()
+    state = TrainingCheckpoint(tmp_path, {"exp": "linear"}).load_latest()
+    assert state is not None and state["step"] == 4
+    assert all(torch.isfinite(v).all() for v in state["model"].values())
+
+
+def test_checkpoint_of_another_experiment_is_refused(tmp_path: Path) -> None:
+    make_trainer(tmp_path, steps=2).fit()
+    with pytest.raises(CheckpointError, match="different experiment"):
+        TrainingCheckpoint(tmp_path, {"exp": "other"}).load_latest()
+
+
+def test_truncated_checkpoint_is_refused(tmp_path: Path) -> None:
+    make_trainer(tmp_path, steps=2).fit()
+    last = TrainingCheckpoint(tmp_path, {}).last_path
+    last.write_bytes(last.read_bytes()[:100])
+    with pytest.raises(CheckpointError, match="corrupt or truncated"):
+        make_trainer(tmp_path, steps=4).resume()
