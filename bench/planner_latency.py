@@ -11,7 +11,10 @@ alike; process CPU time is reported too, as it is far less sensitive to other pr
 shared machine. The last line is ``ratio: X``, the geometric mean over settings of our CEM
 wall time over torchrl's CEMPlanner wall time (both without autograd).
 
-Usage: python bench/planner_latency.py [--repeats 3] [--device cpu] [--hidden 128]
+``--env kinet`` times the real :class:`~kinet_rl.control.KINetModelEnv` (a randomly initialised
+KINet of the default size, 64x64 images, graph-similarity reward) instead of the stand-in.
+
+Usage: python bench/planner_latency.py [--env graph|kinet] [--repeats 3] [--device cpu] [--hidden 128]
 """
 
 from __future__ import annotations
@@ -99,6 +102,20 @@ class GraphModelEnv(ModelBasedEnvBase):
         return TensorDict({KP_POS: pos}, batch_size=[], device=self.device)
 
 
+def make_bench_env(kind: str, num_keypoints: int, hidden: int, device: torch.device):
+    """The model env to plan on and a start state: the stand-in graph env or a real KINet env."""
+    if kind == "graph":
+        env = GraphModelEnv(num_keypoints, hidden, device)
+        return env, env.reset()
+    from kinet_rl.control import KINetModelEnv
+    from kinet_rl.models import KINetWorldModel
+
+    model = KINetWorldModel(num_keypoints=num_keypoints, hidden_dim=hidden).to(device).eval()
+    env = KINetModelEnv(model)
+    pixels = torch.randint(0, 256, (2, 64, 64, 3), dtype=torch.uint8, device=device)
+    return env, env.reset(env.observe(pixels[0], pixels[1]))
+
+
 def _sync(device: torch.device) -> None:
     if device.type == "cuda":
         torch.cuda.synchronize(device)
@@ -144,9 +161,9 @@ def matmul_flops_per_s(device: torch.device, size: int = 2048, rounds: int = 5) 
     return 2 * size**3 / (ms / 1e3)
 
 
-def plan_model_flops(env: GraphModelEnv, candidates: int, horizon: int, iterations: int) -> int:
+def plan_model_flops(env, td, candidates: int, horizon: int, iterations: int) -> int:
     """Model FLOPs of one plan: one batched world-model step, times horizon * iterations."""
-    td = env.reset().expand(candidates).clone()
+    td = td.expand(candidates).clone()
     td.set(ACTION, torch.zeros(candidates, ACTION_DIM, device=env.device))
     with FlopCounterMode(display=False) as counter, torch.no_grad():
         env.world_model(td)
@@ -163,6 +180,12 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="interleaved timing rounds")
     parser.add_argument("--device", default="cpu")
     parser.add_argument(
+        "--env",
+        choices=("graph", "kinet"),
+        default="graph",
+        help="stand-in message-passing env, or the real KINetModelEnv",
+    )
+    parser.add_argument(
         "--hidden", type=int, default=128, help="MLP width; small values expose planner overhead"
     )
     args = parser.parse_args()
@@ -173,8 +196,7 @@ def main() -> None:
     rows = []
     common = dict(optim_steps=args.iterations, num_candidates=args.candidates, top_k=args.top_k)
     for num_keypoints in args.keypoints:
-        env = GraphModelEnv(num_keypoints, args.hidden, device)
-        td = env.reset()
+        env, td = make_bench_env(args.env, num_keypoints, args.hidden, device)
         for horizon in args.horizons:
             theirs = CEMPlanner(env, planning_horizon=horizon, **common)
             ours_cem = GraphMPCPlanner(env, planning_horizon=horizon, update_rule="cem", **common)
@@ -189,7 +211,7 @@ def main() -> None:
                 args.repeats,
                 device,
             )
-            flops = plan_model_flops(env, args.candidates, horizon, args.iterations)
+            flops = plan_model_flops(env, td, args.candidates, horizon, args.iterations)
             rows.append((num_keypoints, horizon, times, flops))
     peak = max(peak_before, matmul_flops_per_s(device))
     print_table(rows, peak, args)
@@ -198,7 +220,7 @@ def main() -> None:
 def print_table(rows: list, peak: float, args: argparse.Namespace) -> None:
     """Prints the latency table and, last, the geometric-mean ratio of ours (CEM) to torchrl's."""
     print(
-        f"device={args.device} threads={torch.get_num_threads()} hidden={args.hidden} "
+        f"env={args.env} device={args.device} threads={torch.get_num_threads()} hidden={args.hidden} "
         f"candidates={args.candidates} iterations={args.iterations} top_k={args.top_k} "
         f"rounds={args.repeats}; matmul 2048^2 (best): {peak / 1e9:.1f} GFLOP/s"
     )

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import Any, cast
 
 import hydra
 from hydra.utils import instantiate
@@ -21,11 +22,16 @@ logger = logging.getLogger(__name__)
 CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 
 
+def to_dict(node: DictConfig) -> dict[str, Any]:
+    """A config node as a resolved plain dict."""
+    return cast(dict[str, Any], OmegaConf.to_container(node, resolve=True))
+
+
 def collect_all(cfg: DictConfig) -> list[Path]:
     """Collects the main dataset and its generalization sets described by ``cfg``."""
-    data = OmegaConf.to_container(cfg.data, resolve=True)
+    data = to_dict(cfg.data)
     generalization = data.pop("generalization", None) or {}
-    jobs = [(data, {})]
+    jobs: list[tuple[dict[str, Any], dict[str, Any]]] = [(data, {})]
     for offset, (name, extra) in enumerate(generalization.items(), start=1):
         extra = dict(extra)
         env_overrides = extra.pop("env", None) or {}
@@ -33,7 +39,7 @@ def collect_all(cfg: DictConfig) -> list[Path]:
     paths = []
     for job, env_overrides in jobs:
         env_fn = instantiate(cfg.env, **env_overrides, _partial_=True, _convert_="all")
-        env_config = OmegaConf.to_container(cfg.env, resolve=True)
+        env_config = to_dict(cfg.env)
         env_config.pop("_target_")
         env_config.update(env_overrides)
         paths.append(collect_dataset(env_fn=env_fn, env_config=env_config, **job))

@@ -29,7 +29,11 @@ def collect_command(root: Path, *overrides: str) -> list[str]:
 def run_collect(root: Path, *overrides: str) -> None:
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
     result = subprocess.run(
-        collect_command(root, *overrides), cwd=REPO, env=env, capture_output=True, text=True,
+        collect_command(root, *overrides),
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
         timeout=240,
     )
     assert result.returncode == 0, result.stderr[-3000:]
@@ -69,8 +73,11 @@ def test_killed_run_resumes_to_the_uninterrupted_dataset(tmp_path: Path) -> None
     run_collect(full, *MAIN_ONLY)
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
     process = subprocess.Popen(
-        collect_command(killed, *MAIN_ONLY), cwd=REPO, env=env,
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        collect_command(killed, *MAIN_ONLY),
+        cwd=REPO,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
     )
     progress = killed / "smoke" / "progress.json"
     deadline = time.monotonic() + 120

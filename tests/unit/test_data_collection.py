@@ -12,7 +12,6 @@ from tensordict import TensorDict
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from fake_push_env import make_fake_env  # noqa: E402
-
 from kinet_rl.data import (  # noqa: E402
     DatasetIncompleteError,
     DatasetMismatchError,
@@ -26,7 +25,9 @@ ENV_CONFIG = {"task": "fake", "camera": "top", "image_size": 8}
 
 
 def collect(root: Path, name: str, unstable_prob: float = 0.1, **kwargs) -> Path:
-    env_fn = functools.partial(make_fake_env, image_size=8, max_steps=4, unstable_prob=unstable_prob)
+    env_fn = functools.partial(
+        make_fake_env, image_size=8, max_steps=4, unstable_prob=unstable_prob
+    )
     settings = {"num_episodes": 10, "num_workers": 1, "chunk_episodes": 3, "seed": 7}
     settings.update(kwargs)
     return collect_dataset(env_fn, ENV_CONFIG, root=root, name=name, progress=False, **settings)
@@ -111,3 +112,11 @@ def test_resume_with_other_settings_is_refused(tmp_path: Path, monkeypatch) -> N
 def test_runaway_instability_aborts(tmp_path: Path) -> None:
     with pytest.raises(RuntimeError, match="went unstable"):
         collect(tmp_path, "unstable", unstable_prob=0.9, num_episodes=3)
+
+
+def test_unknown_backend_and_distributed_options_are_refused(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="data.backend must be one of"):
+        collect(tmp_path, "bad", backend="ray")
+    with pytest.raises(ValueError, match=r"data.distributed has \['frames_per_batch'\]"):
+        collect(tmp_path, "bad", backend="distributed", distributed={"frames_per_batch": 3})
+    assert not (tmp_path / "bad").exists()

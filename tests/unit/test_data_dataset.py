@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 import torch
+from tensordict import TensorDict
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from fake_push_env import make_fake_env  # noqa: E402
-
 from kinet_rl.data import (  # noqa: E402
     DatasetCorruptError,
     DatasetIncompleteError,
@@ -59,9 +59,14 @@ def test_transitions_chain_within_episodes(dataset_path: Path) -> None:
     assert torch.equal(batch["next", "pixels"][:2], batch["pixels"][1:])
     assert torch.equal(batch["next", "object_pos"][:2], batch["object_pos"][1:])
     assert torch.equal(batch["pixels_0"], batch["pixels"][:1].expand(3, H, H, 3))
+    stored = TensorDict.load_memmap(dataset_path / EPISODES_DIR)
+    assert torch.equal(batch["pixels"], stored["pixels"][2, :3])
+    assert torch.equal(batch["next", "pixels"], stored["pixels"][2, 1:4])
+    assert torch.equal(batch["action"], stored["action"][2, :3])
+    assert torch.equal(batch["next", "object_pos"], stored["object_pos"][2, 1:4])
     moved = (batch["next", "object_pos"] - batch["object_pos"]).abs().sum((-1, -2)) > 0
     changed = (batch["next", "pixels"] != batch["pixels"]).flatten(1).any(1)
-    assert torch.equal(moved, changed)
+    assert not (changed & ~moved).any()  # a frame changes only when an object moved
 
 
 def test_sequence_batch_shapes_and_consistency(dataset_path: Path) -> None:
@@ -108,6 +113,22 @@ def test_truncated_and_corrupt_datasets_are_refused(tmp_path: Path) -> None:
         load_dataset(path)
     (path / METADATA_FILE).write_text("{not json")
     with pytest.raises(DatasetCorruptError, match="Cannot read"):
+        load_dataset(path)
+
+
+def test_damaged_metadata_and_array_index_are_refused(tmp_path: Path) -> None:
+    path = collect(tmp_path, "ds", num_episodes=2)
+    metadata = json.loads((path / METADATA_FILE).read_text())
+    (path / METADATA_FILE).write_text(json.dumps([metadata]))
+    with pytest.raises(DatasetCorruptError, match="a JSON list, not an object"):
+        load_dataset(path)
+    del metadata["image_size"]
+    (path / METADATA_FILE).write_text(json.dumps(metadata))
+    with pytest.raises(DatasetCorruptError, match=r"lacks \['image_size'\].*collect it again"):
+        load_dataset(path)
+    (path / METADATA_FILE).write_text(json.dumps({**metadata, "image_size": H}))
+    (path / EPISODES_DIR / "meta.json").unlink()
+    with pytest.raises(DatasetCorruptError, match="Cannot open the arrays.*collect it again"):
         load_dataset(path)
 
 

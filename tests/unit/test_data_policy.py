@@ -12,7 +12,6 @@ from tensordict import TensorDict
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from fake_push_env import make_fake_env  # noqa: E402
-
 from kinet_rl.data import EpisodeSeeding, RandomPushPolicy  # noqa: E402
 
 HALF = 0.3
@@ -73,6 +72,10 @@ def test_bad_policy_settings_are_refused() -> None:
         RandomPushPolicy(HALF, object_push_prob=1.5)
     with pytest.raises(ValueError, match="workspace_half_size"):
         RandomPushPolicy(0.0)
+    with pytest.raises(ValueError, match=r"push_length must be \[min, max\]"):
+        RandomPushPolicy(HALF, push_length=(0.6, 0.3))
+    with pytest.raises(ValueError, match="approach_distance"):
+        RandomPushPolicy(HALF, approach_distance=(0.1,))
 
 
 def test_episode_seeding_shares_out_episodes_and_replays_them() -> None:

@@ -42,3 +42,10 @@ def test_prediction_moves_objects_with_their_keypoints():
     pred = predict_object_positions(obj, kp0, kp1, keypoint_membership(kp0, obj))
     torch.testing.assert_close(pred, torch.tensor([[[0.2, 0.0], [1.0, 1.0]]]))
     assert abs(position_error(pred, obj).item() - 0.1) < 1e-6
+
+
+def test_hit_rate_counts_only_the_selected_objects() -> None:
+    kp = torch.tensor([[[10.0, 10.0]]])
+    obj = torch.tensor([[[11.0, 10.0], [-30.0, 5.0]]])  # the second object is out of view
+    assert keypoint_hit_rate(kp, obj, 4.0) == 0.5
+    assert keypoint_hit_rate(kp, obj, 4.0, counted=torch.tensor([[True, False]])) == 1.0

@@ -9,6 +9,7 @@ from kinet_rl.models.keypoints import (
     KeypointDetector,
     KeypointReconstructor,
     gaussian_maps,
+    shift_transport,
     spatial_soft_argmax,
     transport,
 )
@@ -70,31 +71,40 @@ def pixel_centre(row: int, col: int, size: int) -> list[float]:
     return [(2 * col + 1) / size - 1, (2 * row + 1) / size - 1]
 
 
-def test_transport_moves_source_features_to_target():
+def test_shift_transport_moves_source_features_to_target():
     # Keypoints on pixel centres: the blob is exactly 1 there and the shift is whole pixels,
     # so the feature must vanish at the source and reappear, intact, at the target.
     source = torch.zeros(1, 2, 16, 16)
     source[0, :, 4, 4] = torch.tensor([1.0, -2.0])
     pos_src = torch.tensor([[pixel_centre(4, 4, 16)]])
     pos_tgt = torch.tensor([[pixel_centre(10, 12, 16)]])
-    moved = transport(source, pos_src, pos_tgt, std=0.1)
+    moved = shift_transport(source, pos_src, pos_tgt, std=0.1)
     expected = torch.zeros_like(source)
     expected[0, :, 10, 12] = torch.tensor([1.0, -2.0])
     torch.testing.assert_close(moved, expected, atol=1e-5, rtol=0)
 
 
-def test_transport_keeps_features_away_from_both_blobs():
-    source = torch.rand(1, 3, 16, 16)
+def test_transport_pastes_target_features_and_keeps_the_rest():
+    gen = torch.Generator().manual_seed(0)
+    source, target = torch.rand(2, 1, 3, 16, 16, generator=gen)
     pos_src = torch.tensor([[pixel_centre(2, 2, 16)]])
     pos_tgt = torch.tensor([[pixel_centre(3, 4, 16)]])
-    moved = transport(source, pos_src, pos_tgt, std=0.05)
-    far = (slice(None), slice(None), slice(10, 16), slice(10, 16))  # > 0.75 away, blobs ~0
-    torch.testing.assert_close(moved[far], source[far])
+    for out in (
+        transport(source, target, pos_src, pos_tgt, std=0.05),
+        shift_transport(source, pos_src, pos_tgt, std=0.05),
+    ):
+        far = (slice(None), slice(None), slice(10, 16), slice(10, 16))  # > 0.75 away: blobs ~0
+        torch.testing.assert_close(out[far], source[far])
+    rebuilt = transport(source, target, pos_src, pos_tgt, std=0.05)
+    torch.testing.assert_close(rebuilt[..., 3, 4], target[..., 3, 4])  # target blob peak
+    assert rebuilt[..., 2, 2].abs().max() < 0.05  # source blob suppressed (target blob ~0 there)
 
 
-def test_reconstructor_renders_full_size_image(detector):
+def test_reconstructor_rebuilds_and_renders_full_size_images(detector):
     reconstructor = KeypointReconstructor(channels=8, std=0.1)
     enc = detector.encode(torch.rand(3, 16, 16, 3))
-    image = reconstructor(enc, enc.pos, enc.pos.flip(0))
-    assert image.shape == (3, 16, 16, 3)
-    assert torch.isfinite(image).all()
+    source, target = enc.split(2)[0], detector.encode(torch.rand(2, 16, 16, 3))
+    rebuilt = reconstructor(source, target)
+    rendered = reconstructor.render(enc, enc.pos.flip(0))
+    assert rebuilt.shape == (2, 16, 16, 3) and rendered.shape == (3, 16, 16, 3)
+    assert torch.isfinite(rebuilt).all() and torch.isfinite(rendered).all()

@@ -40,7 +40,9 @@ class RegressionLoss(nn.Module):
         return TensorDict({"loss_mse": loss}, batch_size=[])
 
 
-def make_trainer(run_dir: Path, steps: int, loss: nn.Module | None = None, seed: int = 0) -> Trainer:
+def make_trainer(
+    run_dir: Path, steps: int, loss: nn.Module | None = None, seed: int = 0
+) -> Trainer:
     torch.manual_seed(seed)
     settings = TrainerSettings(
         steps=steps, batch_size=8, lr=0.05, log_every=2, eval_every=4, checkpoint_every=2,
@@ -72,7 +74,9 @@ def test_resumed_run_equals_uninterrupted_run(tmp_path: Path) -> None:
     resumed = make_trainer(tmp_path / "split", steps=8, seed=123)  # other init: must be overwritten
     assert resumed.resume() and resumed.step == 4
     resumed.fit()
-    for a, b in zip(straight.loss_module.parameters(), resumed.loss_module.parameters(), strict=True):
+    for a, b in zip(
+        straight.loss_module.parameters(), resumed.loss_module.parameters(), strict=True
+    ):
         torch.testing.assert_close(a, b)
 
 

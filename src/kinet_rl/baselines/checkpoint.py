@@ -31,7 +31,9 @@ class ConfigCheckpointMixin:
     checkpoint_format: ClassVar[str]
     config: dict[str, Any]
 
-    def save_checkpoint(self, path: str | os.PathLike, config: dict[str, Any] | None = None) -> None:
+    def save_checkpoint(
+        self, path: str | os.PathLike, config: dict[str, Any] | None = None
+    ) -> None:
         """Atomically writes weights, the constructor config and optional run ``config`` metadata."""
         assert isinstance(self, nn.Module)
         state = {
@@ -72,7 +74,9 @@ class ConfigCheckpointMixin:
             if stored.get(key, "<missing>") != value
         }
         if diffs:
-            detail = ", ".join(f"{k}: expected {e!r}, checkpoint {s!r}" for k, (e, s) in diffs.items())
+            detail = ", ".join(
+                f"{k}: expected {e!r}, checkpoint {s!r}" for k, (e, s) in diffs.items()
+            )
             raise CheckpointError(
                 f"Checkpoint {path} does not match the requested model config ({detail}); "
                 "use a checkpoint trained with these settings or change the config to match."

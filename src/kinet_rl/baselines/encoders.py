@@ -42,7 +42,11 @@ class ConvEncoder(nn.Module):
                 nn.ReLU(),
             ]
             in_ch = channels
-        layers += [nn.AdaptiveAvgPool2d(POOLED_SIZE), nn.Flatten(), nn.Linear(channels * POOLED_SIZE**2, out_dim)]
+        layers += [
+            nn.AdaptiveAvgPool2d(POOLED_SIZE),
+            nn.Flatten(),
+            nn.Linear(channels * POOLED_SIZE**2, out_dim),
+        ]
         if normalise:
             layers.append(nn.LayerNorm(out_dim, elementwise_affine=False))
         self.net = nn.Sequential(*layers)
@@ -74,7 +78,9 @@ def crop_objects(pixels: Tensor, centres: Tensor, crop_size: float, resolution: 
     batch, num = centres.shape[:2]
     image = pixels_to_input(pixels) + 0.5  # [B, 3, H, W] in [0, 1]
     half = crop_size / pixels.shape[-2]  # half side in normalised units: (size / 2) / (W / 2)
-    steps = (torch.arange(resolution, device=centres.device, dtype=centres.dtype) + 0.5) / resolution
+    steps = (
+        torch.arange(resolution, device=centres.device, dtype=centres.dtype) + 0.5
+    ) / resolution
     offsets = (2.0 * steps - 1.0) * half  # sample centres across the crop
     grid_y, grid_x = torch.meshgrid(offsets, offsets, indexing="ij")
     grid = torch.stack([grid_x, grid_y], dim=-1)  # [r, r, 2]

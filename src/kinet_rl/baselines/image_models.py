@@ -25,7 +25,7 @@ from torch import Tensor, nn
 from kinet_rl.baselines.checkpoint import ConfigCheckpointMixin
 from kinet_rl.baselines.encoders import ConvEncoder
 from kinet_rl.envs.workspace import workspace_for
-from kinet_rl.evaluation.forward import SceneGeometry
+from kinet_rl.evaluation.forward import SceneGeometry, model_device
 from kinet_rl.keys import ACTION, OBJECT_POS, PIXELS
 from kinet_rl.models.interaction import ACTION_DIM, mlp
 
@@ -48,7 +48,8 @@ class MotionProbe(nn.Module):
 
     def forward(self, feat: Tensor, next_feat: Tensor, pos: Tensor) -> Tensor:
         """``[*B, D], [*B, D], [*B, N, 2]`` (workspace units) -> displacement ``[*B, N, 2]``."""
-        pair = torch.cat([feat, next_feat], dim=-1).unsqueeze(-2).expand(*pos.shape[:-1], -1)
+        pair = torch.cat([feat, next_feat - feat], dim=-1)
+        pair = pair.unsqueeze(-2).expand(*pos.shape[:-1], -1)
         return self.net(torch.cat([pair, pos], dim=-1))
 
 
@@ -168,6 +169,9 @@ class FeatureObjectRollout:
 
     @torch.no_grad()
     def __call__(self, start: TensorDictBase, actions: Tensor) -> Tensor:
+        out_device = actions.device
+        device = model_device(self.model)
+        start, actions = start.to(device), actions.to(device)
         feat = self.model.encode(start[PIXELS])
         pos = start[OBJECT_POS]
         steps = []
@@ -176,4 +180,4 @@ class FeatureObjectRollout:
             pos = pos + self.model.probe_motion(feat, next_feat, pos)
             steps.append(pos)
             feat = next_feat
-        return torch.stack(steps, dim=1)
+        return torch.stack(steps, dim=1).to(out_device)

@@ -76,7 +76,10 @@ class ImageForwardLoss(LossModule):
     ) -> None:
         super().__init__()
         _check_weights(
-            fwd_weight=fwd_weight, ctr_weight=ctr_weight, inv_weight=inv_weight, probe_weight=probe_weight
+            fwd_weight=fwd_weight,
+            ctr_weight=ctr_weight,
+            inv_weight=inv_weight,
+            probe_weight=probe_weight,
         )
         if ctr_temperature <= 0:
             raise ValueError(f"ctr_temperature must be > 0, got {ctr_temperature}.")

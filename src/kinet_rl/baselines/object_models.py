@@ -28,7 +28,7 @@ from torch import Tensor, nn
 from kinet_rl.baselines.checkpoint import ConfigCheckpointMixin
 from kinet_rl.baselines.encoders import ConvEncoder, crop_objects
 from kinet_rl.envs.workspace import workspace_for
-from kinet_rl.evaluation.forward import SceneGeometry
+from kinet_rl.evaluation.forward import SceneGeometry, model_device
 from kinet_rl.evaluation.projection import (
     OBJECT_CENTRE_HEIGHT,
     CameraProjection,
@@ -97,7 +97,9 @@ class ObjectInteractionModel(ConfigCheckpointMixin, nn.Module):
     def check_objects(self, object_pos: Tensor) -> None:
         """Raises :class:`ObjectCountError` unless ``object_pos`` is ``[*B, num_objects, 2]``."""
         if object_pos.dim() < 2 or object_pos.shape[-1] != 2:
-            raise ValueError(f"object_pos must be [*B, N, 2] metres, got {tuple(object_pos.shape)}.")
+            raise ValueError(
+                f"object_pos must be [*B, N, 2] metres, got {tuple(object_pos.shape)}."
+            )
         if object_pos.shape[-2] != self.num_objects:
             raise ObjectCountError(
                 f"{type(self).__name__} was trained for num_objects={self.num_objects}, but this "
@@ -166,6 +168,8 @@ class VisualInteractionModel(ObjectInteractionModel):
     """
 
     checkpoint_format = "kinet_rl.VisualInteractionModel/1"
+    camera_position: Tensor  # [3] buffer
+    camera_rotation: Tensor  # [3, 3] buffer
 
     def __init__(
         self,
@@ -218,7 +222,9 @@ class VisualInteractionModel(ObjectInteractionModel):
                 f"{type(self).__name__} was built for {self.image_size}x{self.image_size} images "
                 f"[B, H, W, 3], got {tuple(pixels.shape)}; set image_size to the data's env.image_size."
             )
-        projection = CameraProjection(self.camera_position, self.camera_rotation, self.tan_half_fovy)
+        projection = CameraProjection(
+            self.camera_position, self.camera_rotation, self.tan_half_fovy
+        )
         centres = projection.objects_to_image(object_pos, self.object_height)
         crops = crop_objects(pixels, centres, self.crop_size, self.crop_resolution)
         return self.crop_encoder(crops)
@@ -248,10 +254,13 @@ class ObjectStateRollout:
 
     @torch.no_grad()
     def __call__(self, start: TensorDictBase, actions: Tensor) -> Tensor:
+        out_device = actions.device
+        device = model_device(self.model)
+        start, actions = start.to(device), actions.to(device)
         node_feat = self.model.node_features(start)
         pos = start[OBJECT_POS]
         steps = []
         for h in range(actions.shape[1]):
             pos = self.model.predict(pos, node_feat, actions[:, h])
             steps.append(pos)
-        return torch.stack(steps, dim=1)
+        return torch.stack(steps, dim=1).to(out_device)

@@ -20,7 +20,8 @@ from kinet_rl.evaluation.forward import SceneGeometry
 from kinet_rl.evaluation.projection import OBJECT_CENTRE_HEIGHT, camera_projection
 
 COLOURS = torch.tensor(
-    [[220, 40, 40], [40, 190, 40], [40, 60, 220], [220, 200, 40], [200, 40, 200]], dtype=torch.float32
+    [[220, 40, 40], [40, 190, 40], [40, 60, 220], [220, 200, 40], [200, 40, 200]],
+    dtype=torch.float32,
 )
 BACKGROUND = 128.0
 TASK = "blocks"
@@ -102,7 +103,9 @@ class ToyPushData:
         depth = float(projection.position[2]) - self.geometry.object_height
         px_per_metre = image_size / 2 / (depth * projection.tan_half_fovy)
         self.pixels = render_squares(
-            self.geometry.objects_to_pixels(self.object_pos), object_half_size * px_per_metre, image_size
+            self.geometry.objects_to_pixels(self.object_pos),
+            object_half_size * px_per_metre,
+            image_size,
         )  # [E, T+1, H, W, 3]
 
     @staticmethod
@@ -111,7 +114,9 @@ class ToyPushData:
     ) -> tuple[Tensor, Tensor]:
         """Push start and end ``[E, 2]`` metres, clipped to the workspace."""
         num_episodes, num_objects = pos.shape[:2]
-        target = pos[torch.arange(num_episodes), torch.randint(num_objects, (num_episodes,), generator=gen)]
+        target = pos[
+            torch.arange(num_episodes), torch.randint(num_objects, (num_episodes,), generator=gen)
+        ]
         angle = torch.rand(num_episodes, generator=gen) * 2 * torch.pi
         direction = torch.stack([angle.cos(), angle.sin()], dim=-1)
         normal = torch.stack([-direction[:, 1], direction[:, 0]], dim=-1)
@@ -121,7 +126,7 @@ class ToyPushData:
         aimed_start = target - approach * direction + offset * normal
         aimed_end = aimed_start + length * direction
         uniform = (torch.rand(num_episodes, 2, 2, generator=gen) * 2 - 1) * workspace
-        aimed = (torch.rand(num_episodes, 1, generator=gen) < aimed_prob)
+        aimed = torch.rand(num_episodes, 1, generator=gen) < aimed_prob
         start = torch.where(aimed, aimed_start, uniform[:, 0]).clamp(-workspace, workspace)
         end = torch.where(aimed, aimed_end, uniform[:, 1]).clamp(-workspace, workspace)
         return start, end

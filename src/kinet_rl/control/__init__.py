@@ -5,6 +5,7 @@ Unlike :mod:`kinet_rl.planners` (generic), this package depends on :mod:`kinet_r
 
 from __future__ import annotations
 
+from kinet_rl.control.evaluation import RearrangementSettings, evaluate_rearrangement
 from kinet_rl.control.model_env import KINetModelEnv, chamfer_distance, make_kinet_planner
 from kinet_rl.control.oracle import AnalyticPushModelEnv, analytic_push
 from kinet_rl.control.robot import Push, PushPlanner
@@ -14,7 +15,9 @@ __all__ = [
     "KINetModelEnv",
     "Push",
     "PushPlanner",
+    "RearrangementSettings",
     "analytic_push",
     "chamfer_distance",
+    "evaluate_rearrangement",
     "make_kinet_planner",
 ]

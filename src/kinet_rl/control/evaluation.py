@@ -74,13 +74,21 @@ class RearrangementSettings:
     episodes: int = 4
     methods: tuple[str, ...] = METHODS
     planner: Mapping[str, Any] = field(
-        default_factory=lambda: {"planning_horizon": 1, "optim_steps": 3, "num_candidates": 64,
-                                 "top_k": 8}
-    )  # fmt: skip
+        default_factory=lambda: {
+            "planning_horizon": 1,
+            "optim_steps": 3,
+            "num_candidates": 64,
+            "top_k": 8,
+        }
+    )
     oracle_planner: Mapping[str, Any] = field(
-        default_factory=lambda: {"planning_horizon": 1, "optim_steps": 5, "num_candidates": 256,
-                                 "top_k": 16}
-    )  # fmt: skip
+        default_factory=lambda: {
+            "planning_horizon": 1,
+            "optim_steps": 5,
+            "num_candidates": 256,
+            "top_k": 16,
+        }
+    )
     oracle_contact_radius: float = 0.035
     num_objects: tuple[int, ...] = ()
     geometries: tuple[str, ...] = ("train", "gen")
@@ -98,7 +106,9 @@ class RearrangementSettings:
             raise ValueError("episodes and task.num_steps must be at least 1.")
 
     @classmethod
-    def from_dicts(cls, eval_cfg: Mapping[str, Any], env_cfg: Mapping[str, Any]) -> RearrangementSettings:
+    def from_dicts(
+        cls, eval_cfg: Mapping[str, Any], env_cfg: Mapping[str, Any]
+    ) -> RearrangementSettings:
         """Builds settings from plain dicts: the ``eval`` group and the ``env`` group of a run."""
         scene_names = {f.name for f in fields(SceneSettings)}
         task_names = {f.name for f in fields(TaskSettings)}
@@ -119,6 +129,13 @@ class RearrangementSettings:
                 kwargs[key] = dict(kwargs[key])
         return cls(scene=scene, task=task, **kwargs)
 
+    def as_dict(self) -> dict[str, Any]:
+        """Plain-container form (for JSON)."""
+        out = asdict(self)
+        out["planner"] = dict(self.planner)
+        out["oracle_planner"] = dict(self.oracle_planner)
+        return out
+
     def conditions(self, generalization: bool = True) -> list[Condition]:
         """The comparison, then (if ``generalization``) the Table II cells and backgrounds."""
         out = [Condition("comparison", self.scene, self.methods, self.episodes)]
@@ -127,12 +144,24 @@ class RearrangementSettings:
         for geometry in self.geometries if self.scene.task == "blocks" else ("train",):
             for n in self.num_objects:
                 scene = replace(self.scene, num_objects=n, geometry=geometry)
-                out.append(Condition(f"n{n}_geom_{geometry}", scene, ("kinet_graph",),
-                                     self.generalization_episodes))  # fmt: skip
+                out.append(
+                    Condition(
+                        f"n{n}_geom_{geometry}",
+                        scene,
+                        ("kinet_graph",),
+                        self.generalization_episodes,
+                    )
+                )
         for background in self.backgrounds:
             scene = replace(self.scene, background=background)
-            out.append(Condition(f"background_{background}", scene, ("kinet_graph", "random"),
-                                 self.generalization_episodes))  # fmt: skip
+            out.append(
+                Condition(
+                    f"background_{background}",
+                    scene,
+                    ("kinet_graph", "random"),
+                    self.generalization_episodes,
+                )
+            )
         return out
 
 
@@ -151,7 +180,10 @@ _WORKER_MODEL: KINetWorldModel | None = None
 
 
 def _model_payload(model: KINetWorldModel) -> dict[str, Any]:
-    return {"config": dict(model.config), "state_dict": {k: v.cpu() for k, v in model.state_dict().items()}}
+    return {
+        "config": dict(model.config),
+        "state_dict": {k: v.cpu() for k, v in model.state_dict().items()},
+    }
 
 
 def _init_worker(payload: dict[str, Any] | None) -> None:
@@ -164,24 +196,31 @@ def _init_worker(payload: dict[str, Any] | None) -> None:
 
 
 def make_controller(
-    method: str, model: KINetWorldModel | None, scene: SceneSettings, settings: RearrangementSettings,
+    method: str,
+    model: KINetWorldModel | None,
+    scene: SceneSettings,
+    settings: RearrangementSettings,
     seed: int,
-):  # fmt: skip
+):
     """The controller of ``method`` for one episode, seeded by ``seed``."""
     if method == "random":
         return RandomController(seed)
     if method == "oracle":
-        return OracleController(scene, dict(settings.oracle_planner), settings.oracle_contact_radius,
-                                seed)  # fmt: skip
+        return OracleController(
+            scene, dict(settings.oracle_planner), settings.oracle_contact_radius, seed
+        )
     if model is None:
         raise ValueError(f"Method {method!r} needs a trained KINet model; pass model=.")
     half_size = workspace_for(scene.task).half_size
-    planner = PushPlanner(model, half_size, reward=KINET_REWARDS[method], seed=seed,
-                          **dict(settings.planner))  # fmt: skip
+    planner = PushPlanner(
+        model, half_size, reward=KINET_REWARDS[method], seed=seed, **dict(settings.planner)
+    )
     return KINetController(planner)
 
 
-def _run_job(job: Job, settings: RearrangementSettings, model: KINetWorldModel | None) -> EpisodeResult:
+def _run_job(
+    job: Job, settings: RearrangementSettings, model: KINetWorldModel | None
+) -> EpisodeResult:
     episode = make_episode(job.scene, settings.task, job.seed)
     try:
         controller = make_controller(job.method, model, job.scene, settings, job.seed)
@@ -201,13 +240,20 @@ def make_jobs(settings: RearrangementSettings, conditions: Iterable[Condition]) 
     for condition in conditions:
         for method in condition.methods:
             for i in range(condition.episodes):
-                record = condition.name == "comparison" and method == "kinet_graph" and i < settings.videos
+                record = (
+                    condition.name == "comparison"
+                    and method == "kinet_graph"
+                    and i < settings.videos
+                )
                 jobs.append(Job(condition.name, method, settings.seed + i, condition.scene, record))
     return jobs
 
 
 def run_jobs(
-    jobs: list[Job], settings: RearrangementSettings, model: KINetWorldModel | None, progress: bool = False
+    jobs: list[Job],
+    settings: RearrangementSettings,
+    model: KINetWorldModel | None,
+    progress: bool = False,
 ) -> dict[str, dict[str, list[EpisodeResult]]]:
     """Runs ``jobs`` (in parallel with ``settings.workers`` > 1); results by condition and method."""
     from tqdm import tqdm
@@ -223,7 +269,9 @@ def run_jobs(
         payload = None if model is None else _model_payload(model)
         context = multiprocessing.get_context("spawn")
         with context.Pool(settings.workers, initializer=_init_worker, initargs=(payload,)) as pool:
-            for job, result in pool.imap_unordered(_run_job_in_worker, [(j, settings) for j in jobs]):
+            for job, result in pool.imap_unordered(
+                _run_job_in_worker, [(j, settings) for j in jobs]
+            ):
                 results.setdefault(job.condition, {}).setdefault(job.method, []).append(result)
                 bar.update()
     bar.close()
@@ -274,7 +322,9 @@ def evaluate_rearrangement(
     from kinet_rl.control.report import write_report
 
     if not isinstance(settings, RearrangementSettings):
-        settings = RearrangementSettings.from_dicts(settings.get("eval", {}), settings.get("env", {}))
+        settings = RearrangementSettings.from_dicts(
+            settings.get("eval", {}), settings.get("env", {})
+        )
     conditions = settings.conditions(generalization)
     if model is None:
         needs = sorted({m for c in conditions for m in c.methods if m in KINET_REWARDS})
@@ -287,11 +337,4 @@ def evaluate_rearrangement(
     }
     files = write_report(Path(out_dir), settings, summary, results)
     logger.info("Rearrangement evaluation written to %s", out_dir)
-    return {"summary": summary, "settings": _settings_dict(settings), "files": [str(f) for f in files]}
-
-
-def _settings_dict(settings: RearrangementSettings) -> dict[str, Any]:
-    out = asdict(settings)
-    out["planner"] = dict(settings.planner)
-    out["oracle_planner"] = dict(settings.oracle_planner)
-    return out
+    return {"summary": summary, "settings": settings.as_dict(), "files": [str(f) for f in files]}

@@ -150,7 +150,7 @@ class KINetModelEnv(ModelBasedEnvBase):
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         if tensordict is not None and KP_POS in tensordict.keys(True):
             return tensordict.select(*self.state_spec.keys(True, True)).clone()
-        if tensordict is None or PIXELS not in tensordict.keys():
+        if tensordict is None or PIXELS not in tensordict.keys():  # noqa: SIM118 (TensorDict)
             raise KeyError(
                 "KINetModelEnv.reset needs a tensordict with the state keys, or with 'pixels' "
                 "and ('goal', 'pixels'); env.observe(pixels, goal_pixels) builds the state."

@@ -92,7 +92,7 @@ class AnalyticPushModelEnv(ModelBasedEnvBase):
         self.reward_spec = Unbounded((1,))
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
-        if tensordict is None or OBJECT_POS not in tensordict.keys():
+        if tensordict is None or OBJECT_POS not in tensordict.keys():  # noqa: SIM118 (TensorDict)
             raise KeyError(
                 f"AnalyticPushModelEnv.reset needs a tensordict with {OBJECT_POS!r} and "
                 f"{GOAL_OBJECT_POS!r} (the start and goal object positions, metres)."

@@ -195,6 +195,8 @@ class KINetController:
 
     def act(self, observation: dict[str, np.ndarray]) -> np.ndarray:
         """Plans on the keypoints of the current image."""
+        if self.goal_pixels is None:
+            raise RuntimeError("KINetController.act called before reset(episode); reset it first.")
         push = self.push_planner.next_push(observation["pixels"], self.goal_pixels)
         return np.asarray(push.normalised, dtype=np.float32)
 

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import torch
 
-from kinet_rl.atomic import atomic_save_with, atomic_write_json, atomic_write_text
+from kinet_rl.atomic import atomic_save_with, atomic_write, atomic_write_json, atomic_write_text
 from kinet_rl.evaluation.images import draw_keypoints, image_grid, upscale
 from kinet_rl.evaluation.projection import normalised_to_pixels
 
@@ -79,16 +79,25 @@ def markdown(settings: RearrangementSettings, summary: Summary, plot_name: str) 
     cells = {name: stats for name, stats in summary.items() if name.startswith("n")}
     if cells:
         geometries = [g for g in settings.geometries if any(k.endswith(f"geom_{g}") for k in cells)]
-        lines += ["", "Generalization (KINet-GraphMPC final distance at T, mm; paper Table II layout):",
-                  "", "| N | " + " | ".join(f"geom_{g}" for g in geometries) + " |",
-                  "|---|" + "---|" * len(geometries)]  # fmt: skip
+        lines += [
+            "",
+            "Generalization (KINet-GraphMPC final distance at T, mm; paper Table II layout):",
+            "",
+            "| N | " + " | ".join(f"geom_{g}" for g in geometries) + " |",
+            "|---|" + "---|" * len(geometries),
+        ]
         for n in settings.num_objects:
             row = [_final(cells.get(f"n{n}_geom_{g}", {}).get("kinet_graph")) for g in geometries]
             lines.append(f"| {n} | " + " | ".join(row) + " |")
     backgrounds = {k: v for k, v in summary.items() if k.startswith("background_")}
     if backgrounds:
-        lines += ["", "Backgrounds (final distance at T, mm):", "",
-                  "| background | KINet-GraphMPC | Random pushes |", "|---|---|---|"]  # fmt: skip
+        lines += [
+            "",
+            "Backgrounds (final distance at T, mm):",
+            "",
+            "| background | KINet-GraphMPC | Random pushes |",
+            "|---|---|---|",
+        ]
         for name, by_method in backgrounds.items():
             lines.append(
                 f"| {name.removeprefix('background_')} | {_final(by_method.get('kinet_graph'))} | "
@@ -131,9 +140,10 @@ def write_video(result: EpisodeResult, path: Path, fps: float = 4.0) -> Path:
     import imageio.v3 as iio
 
     frames = np.stack(video_frames(result))
-    return atomic_save_with(
-        path, lambda f: iio.imwrite(f, frames, extension=".gif", duration=1000.0 / fps, loop=0)
-    )
+    data = iio.imwrite("<bytes>", frames, extension=".gif", duration=1000.0 / fps, loop=0)
+    with atomic_write(path, "wb") as f:
+        f.write(data)
+    return path
 
 
 def write_report(
@@ -143,11 +153,14 @@ def write_report(
     results: dict[str, dict[str, list[EpisodeResult]]],
 ) -> list[Path]:
     """Writes ``rearrangement.png``, ``rearrangement.md``, ``rearrangement.json`` and videos."""
-    from kinet_rl.control.evaluation import _settings_dict
-
     out_dir.mkdir(parents=True, exist_ok=True)
-    files = [plot_curves(summary["comparison"], out_dir / "rearrangement.png",
-                         f"Rearrangement, {settings.scene.num_objects} objects")]  # fmt: skip
+    files = [
+        plot_curves(
+            summary["comparison"],
+            out_dir / "rearrangement.png",
+            f"Rearrangement, {settings.scene.num_objects} objects",
+        )
+    ]
     for name, by_method in summary.items():
         if name.startswith("background_"):
             files.append(plot_curves(by_method, out_dir / f"rearrangement_{name}.png", name))
@@ -156,6 +169,7 @@ def write_report(
             files.append(write_video(result, out_dir / f"rearrangement_seed{result.seed}.gif"))
     text = markdown(settings, summary, "rearrangement.png")
     atomic_write_text(out_dir / "rearrangement.md", text)
-    atomic_write_json(out_dir / "rearrangement.json",
-                      {"summary": summary, "settings": _settings_dict(settings)})  # fmt: skip
+    atomic_write_json(
+        out_dir / "rearrangement.json", {"summary": summary, "settings": settings.as_dict()}
+    )
     return [*files, out_dir / "rearrangement.md", out_dir / "rearrangement.json"]

@@ -45,7 +45,7 @@ class Push:
 
 def as_image_tensor(image: np.ndarray | Tensor, name: str = "image") -> Tensor:
     """An ``[H, W, 3]`` uint8 image as a tensor; clear errors for anything else."""
-    tensor = torch.as_tensor(np.asarray(image) if not isinstance(image, Tensor) else image)
+    tensor = image if isinstance(image, Tensor) else torch.from_numpy(np.array(image))  # a copy
     if tensor.dim() != 3 or tensor.shape[-1] != 3:
         raise ValueError(
             f"{name} must be an RGB image [H, W, 3], got shape {tuple(tensor.shape)}; drop any "

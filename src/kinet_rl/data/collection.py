@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import importlib.metadata
+import inspect
 import logging
 import platform
 import time
@@ -14,6 +15,7 @@ from typing import Any
 import torch
 from tensordict import TensorDict, TensorDictBase
 from torchrl.collectors import Collector, MultiSyncCollector
+from torchrl.collectors.distributed import DistributedCollector
 from torchrl.envs import EnvBase, StepCounter
 from tqdm import tqdm
 
@@ -31,6 +33,12 @@ logger = logging.getLogger(__name__)
 
 VERSIONED_PACKAGES = ("kinet_rl", "torch", "torchrl", "tensordict", "mujoco", "dm-control", "numpy")
 DEFAULT_SPLITS = {"train": 0.8, "val": 0.1, "test": 0.1}
+BACKENDS = ("local", "distributed")
+# DistributedCollector stops after total_frames (-1 yields nothing there); collect_dataset stops
+# it itself once the dataset is full, so it gets a bound it never reaches.
+UNBOUNDED_FRAMES = 2**62
+# DistributedCollector arguments that make_collector sets itself.
+DISTRIBUTED_FIXED_ARGS = ("create_env_fn", "policy", "frames_per_batch", "total_frames", "sync")
 
 
 def seeded_env(
@@ -131,6 +139,19 @@ class EpisodeAssembler:
         return ready
 
 
+def check_backend(backend: str, distributed: Mapping[str, Any] | None) -> None:
+    """Raises ``ValueError`` for an unknown backend or unsettable ``DistributedCollector`` options."""
+    if backend not in BACKENDS:
+        raise ValueError(f"data.backend must be one of {BACKENDS}, got {backend!r}.")
+    accepted = set(inspect.signature(DistributedCollector).parameters) - set(DISTRIBUTED_FIXED_ARGS)
+    unknown = sorted(set(distributed or {}) - accepted)
+    if unknown:
+        raise ValueError(
+            f"data.distributed has {unknown}, which are not DistributedCollector arguments kinet_rl "
+            f"lets you set; use some of {sorted(accepted)} (e.g. launcher, tcp_port, backend)."
+        )
+
+
 def make_collector(
     env_fn: Callable[[], EnvBase],
     policy: RandomPushPolicy,
@@ -138,26 +159,40 @@ def make_collector(
     first_episode: int,
     num_workers: int,
     episode_length: int,
-) -> Collector | MultiSyncCollector:
-    """One ``Collector`` (1 worker, in process) or a ``MultiSyncCollector`` of worker processes."""
+    backend: str = "local",
+    distributed: Mapping[str, Any] | None = None,
+) -> Collector | MultiSyncCollector | DistributedCollector:
+    """Builds the collector that streams transitions of episodes ``first_episode, ...``.
+
+    ``backend="local"``: one ``Collector`` in process (1 worker) or a ``MultiSyncCollector`` of
+    worker processes. ``backend="distributed"``: TorchRL's ``DistributedCollector`` over
+    torch.distributed (one node per worker, synchronous), with ``distributed`` as extra
+    arguments; ``launcher="mp"`` (default) starts the nodes on this machine, ``"submitit"`` or
+    ``"submitit_delayed"`` on a SLURM cluster. Worker ``w`` collects episodes
+    ``first_episode + w + k * num_workers`` with either backend.
+    """
+    check_backend(backend, distributed)
     env_fns = [
         functools.partial(seeded_env, env_fn, seed, first_episode + w, num_workers)
         for w in range(num_workers)
     ]
-    if num_workers == 1:
-        return Collector(
-            env_fns[0],
+    common = {"total_frames": -1, "auto_register_policy_transforms": False}
+    if backend == "distributed":
+        options = {"launcher": "mp", **(distributed or {})}
+        node_kwargs = options.pop("collector_kwargs", None) or {}
+        return DistributedCollector(
+            env_fns,
             policy,
-            frames_per_batch=episode_length,
-            total_frames=-1,
-            auto_register_policy_transforms=False,
+            frames_per_batch=episode_length * num_workers,
+            total_frames=UNBOUNDED_FRAMES,
+            sync=True,
+            collector_kwargs={"auto_register_policy_transforms": False, **node_kwargs},
+            **options,
         )
+    if num_workers == 1:
+        return Collector(env_fns[0], policy, frames_per_batch=episode_length, **common)
     return MultiSyncCollector(
-        env_fns,
-        policy,
-        frames_per_batch=episode_length * num_workers,
-        total_frames=-1,
-        auto_register_policy_transforms=False,
+        env_fns, policy, frames_per_batch=episode_length * num_workers, **common
     )
 
 
@@ -175,6 +210,8 @@ def collect_dataset(
     workspace_half_size: float | None = None,
     max_discard_fraction: float = 0.5,
     progress: bool = True,
+    backend: str = "local",
+    distributed: Mapping[str, Any] | None = None,
 ) -> Path:
     """Collects ``num_episodes`` random-push episodes into ``<root>/<name>``; resumes if partial.
 
@@ -196,6 +233,10 @@ def collect_dataset(
         workspace_half_size: metres; read from the env when None.
         max_discard_fraction: abort if more than this fraction of episodes is unstable.
         progress: show a tqdm progress bar.
+        backend: ``"local"`` (this machine's processes) or ``"distributed"`` (TorchRL's
+            ``DistributedCollector``; see :func:`make_collector`). Both give the same data.
+        distributed: extra ``DistributedCollector`` arguments for ``backend="distributed"``,
+            e.g. ``{"launcher": "submitit", "tcp_port": 10003, "slurm_kwargs": {...}}``.
 
     Returns:
         The dataset folder.
@@ -206,6 +247,7 @@ def collect_dataset(
         return path
     if num_episodes < 1 or num_workers < 1 or chunk_episodes < 1:
         raise ValueError("num_episodes, num_workers and chunk_episodes must all be >= 1.")
+    check_backend(backend, distributed)
     splits = dict(DEFAULT_SPLITS if splits is None else splits)
     ranges = split_ranges(num_episodes, splits)
     probe = env_fn()
@@ -233,7 +275,14 @@ def collect_dataset(
     assembler = EpisodeAssembler(writer.processed, episode_length)
     discarded, buffer = writer.discarded, []
     collector = make_collector(
-        env_fn, push_policy, seed, writer.processed, num_workers, episode_length
+        env_fn,
+        push_policy,
+        seed,
+        writer.processed,
+        num_workers,
+        episode_length,
+        backend=backend,
+        distributed=distributed,
     )
     bar = tqdm(total=num_episodes, initial=writer.committed, desc=name, disable=not progress)
     start = time.perf_counter()
@@ -271,6 +320,7 @@ def collect_dataset(
             "splits": ranges,
             "split_fractions": splits,
             "num_workers": num_workers,
+            "backend": backend,
             "discarded_unstable": discarded,
             "processed_episodes": writer.processed,
             "versions": package_versions(),

@@ -29,6 +29,7 @@ from kinet_rl.keys import ACTION, EPISODE, OBJECT_POS, PIXELS, PIXELS_0, STEP
 logger = logging.getLogger(__name__)
 
 ALL_SPLITS = "all"
+REQUIRED_METADATA = ("env", "splits", "num_episodes", "episode_length", "image_size", "num_objects")
 
 
 def _check_expectations(path: Path, metadata: Mapping[str, Any], expect: Mapping[str, Any]) -> None:
@@ -57,7 +58,7 @@ def _rows(stored: torch.Tensor) -> torch.Tensor:
 
 
 class PushDataset:
-    """Random-push transitions of one split, sampled by fancy indexing into memmapped tensors.
+    """Random-push transitions of one split, gathered with index_select from memmapped rows.
 
     Args:
         path: dataset folder ``<root>/<name>`` written by :func:`collect_dataset`.
@@ -87,6 +88,12 @@ class PushDataset:
                 f"(complete={metadata.get('complete')}); this kinet_rl reads format "
                 f"{FORMAT_VERSION}. Collect it again: {COLLECT_HINT}"
             )
+        missing = [key for key in REQUIRED_METADATA if key not in metadata]
+        if missing:
+            raise DatasetCorruptError(
+                f"{path / METADATA_FILE} lacks {missing}. Delete {path} and collect it again: "
+                f"{COLLECT_HINT}"
+            )
         if expect:
             _check_expectations(path, metadata, expect)
         splits = {**metadata["splits"], ALL_SPLITS: [0, metadata["num_episodes"]]}
@@ -98,7 +105,13 @@ class PushDataset:
         self.num_objects = metadata["num_objects"]
         specs = episode_array_specs(self.episode_length, self.image_size, self.num_objects)
         check_array_files(path, metadata["num_episodes"], specs)
-        stored = TensorDict.load_memmap(path / EPISODES_DIR)
+        try:
+            stored = TensorDict.load_memmap(path / EPISODES_DIR)
+        except Exception as err:  # tensordict raises several types for a damaged folder
+            raise DatasetCorruptError(
+                f"Cannot open the arrays in {path / EPISODES_DIR} ({type(err).__name__}: {err}). "
+                f"Delete {path} and collect it again: {COLLECT_HINT}"
+            ) from err
         # Row views of the memory maps, indexed with index_select: one row per frame or push
         # (about 9x faster than advanced indexing of the [E, T+1, H, W, 3] tensor).
         self._frames = _rows(stored["pixels"])  # [E * (T+1), H * W * 3]

@@ -29,6 +29,13 @@ def episode_seed(seed: int, episode: int) -> int:
     return int(np.random.SeedSequence([seed, episode]).generate_state(1, np.uint32)[0])
 
 
+def _min_max(name: str, values: Sequence[float]) -> tuple[float, float]:
+    bounds = [float(v) for v in values]
+    if len(bounds) != 2 or bounds[0] > bounds[1]:
+        raise ValueError(f"data.policy.{name} must be [min, max] with min <= max, got {values}.")
+    return bounds[0], bounds[1]
+
+
 class RandomPushPolicy(TensorDictModuleBase):
     """Samples pushes that mostly pass through an object, mixed with uniform pushes.
 
@@ -36,8 +43,11 @@ class RandomPushPolicy(TensorDictModuleBase):
     is drawn uniformly, the push starts ``approach_distance`` behind the object's centre (plus a
     sideways offset of at most ``lateral_noise``) and runs ``push_length`` along the direction,
     so it passes through the object when ``push_length > approach_distance``. Otherwise start
-    and end are uniform in the workspace. Distances are in normalised action units (the
-    workspace spans [-1, 1]); ranges are sampled uniformly; actions are clipped to [-1, 1].
+    and end are uniform in the workspace. Every push ends inside ``[-keep_inside, keep_inside]^2``
+    (object pushes redraw their direction until it does, up to 32 tries, then aim at the centre),
+    so random pushes do not herd the objects to the table edges, out of the pusher's reach and
+    out of the camera's view. Distances are in normalised action units (the workspace spans
+    [-1, 1]); ranges are sampled uniformly; actions are clipped to [-1, 1].
 
     Keys:
         in: ``object_pos`` [*B, N, 2] metres, ``episode_seed`` [*B, 1], ``step_count`` [*B, 1].
@@ -49,6 +59,7 @@ class RandomPushPolicy(TensorDictModuleBase):
         approach_distance: (min, max) distance from push start to the object centre.
         push_length: (min, max) length of an object-targeting push.
         lateral_noise: largest sideways offset of the push line from the object centre.
+        keep_inside: largest coordinate of a push's end point (1 disables the constraint).
     """
 
     def __init__(
@@ -58,6 +69,7 @@ class RandomPushPolicy(TensorDictModuleBase):
         approach_distance: Sequence[float] = (0.15, 0.3),
         push_length: Sequence[float] = (0.3, 0.6),
         lateral_noise: float = 0.05,
+        keep_inside: float = 0.8,
     ) -> None:
         super().__init__()
         if not workspace_half_size > 0:
@@ -66,27 +78,43 @@ class RandomPushPolicy(TensorDictModuleBase):
             raise ValueError(f"object_push_prob must lie in [0, 1], got {object_push_prob}.")
         self.workspace_half_size = float(workspace_half_size)
         self.object_push_prob = float(object_push_prob)
-        self.approach_distance = tuple(float(v) for v in approach_distance)
-        self.push_length = tuple(float(v) for v in push_length)
+        self.approach_distance = _min_max("approach_distance", approach_distance)
+        self.push_length = _min_max("push_length", push_length)
         self.lateral_noise = float(lateral_noise)
+        if not 0.0 < keep_inside <= 1.0:
+            raise ValueError(f"data.policy.keep_inside must lie in (0, 1], got {keep_inside}.")
+        self.keep_inside = float(keep_inside)
         self.in_keys = [OBJECT_POS, EPISODE_SEED, STEP_COUNT]
         self.out_keys = [ACTION]
 
     def sample_push(self, rng: np.random.Generator, object_pos: np.ndarray) -> np.ndarray:
         """Samples one push [4] for objects at ``object_pos`` [N, 2] (normalised units)."""
         if rng.random() >= self.object_push_prob:
-            return rng.uniform(-1.0, 1.0, 4)
+            start = rng.uniform(-1.0, 1.0, 2)
+            return np.concatenate([start, rng.uniform(-self.keep_inside, self.keep_inside, 2)])
         target = object_pos[rng.integers(len(object_pos))]
-        angle = rng.uniform(0.0, 2.0 * np.pi)
+        approach = rng.uniform(*self.approach_distance)
+        offset = rng.uniform(-self.lateral_noise, self.lateral_noise)
+        length = rng.uniform(*self.push_length)
+        for _ in range(32):
+            angle = rng.uniform(0.0, 2.0 * np.pi)
+            start, end = self._object_push(target, angle, approach, offset, length)
+            if np.abs(end).max() <= self.keep_inside:
+                break
+        else:  # aim at the workspace centre
+            start, end = self._object_push(
+                target, np.arctan2(-target[1], -target[0]), approach, offset, length
+            )
+        return np.clip(np.concatenate([start, end]), -1.0, 1.0)
+
+    @staticmethod
+    def _object_push(
+        target: np.ndarray, angle: float, approach: float, offset: float, length: float
+    ) -> tuple[np.ndarray, np.ndarray]:
         direction = np.array([np.cos(angle), np.sin(angle)])
         normal = np.array([-direction[1], direction[0]])
-        start = (
-            target
-            - rng.uniform(*self.approach_distance) * direction
-            + rng.uniform(-self.lateral_noise, self.lateral_noise) * normal
-        )
-        end = start + rng.uniform(*self.push_length) * direction
-        return np.clip(np.concatenate([start, end]), -1.0, 1.0)
+        start = target - approach * direction + offset * normal
+        return start, start + length * direction
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         """Writes one push per batch element, seeded by (episode seed, step count)."""
@@ -151,7 +179,9 @@ class EpisodeSeeding(Transform):
     def transform_observation_spec(self, observation_spec: Composite) -> Composite:
         for key in (EPISODE_ID, EPISODE_SEED):
             observation_spec[key] = Unbounded(
-                shape=(*observation_spec.shape, 1), dtype=torch.int64, device=observation_spec.device
+                shape=(*observation_spec.shape, 1),
+                dtype=torch.int64,
+                device=observation_spec.device,
             )
         return observation_spec
 

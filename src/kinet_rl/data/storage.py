@@ -60,11 +60,17 @@ def read_json(path: Path) -> dict[str, Any]:
     """Reads a JSON record, raising :class:`DatasetCorruptError` if it cannot be parsed."""
     try:
         with open(path) as f:
-            return json.load(f)
+            record = json.load(f)
     except (OSError, json.JSONDecodeError) as err:
         raise DatasetCorruptError(
             f"Cannot read {path} ({err}). Delete {path.parent} and collect it again: {COLLECT_HINT}"
         ) from err
+    if not isinstance(record, dict):
+        raise DatasetCorruptError(
+            f"Cannot read {path} (a JSON {type(record).__name__}, not an object). Delete "
+            f"{path.parent} and collect it again: {COLLECT_HINT}"
+        )
+    return record
 
 
 def episode_array_specs(
@@ -170,7 +176,9 @@ class EpisodeWriter:
         """
         stop = self.committed + episodes.shape[0]
         if stop > self.num_episodes:
-            raise ValueError(f"Commit of {episodes.shape[0]} episodes overflows {self.num_episodes}.")
+            raise ValueError(
+                f"Commit of {episodes.shape[0]} episodes overflows {self.num_episodes}."
+            )
         self.storage[self.committed : stop] = episodes.select(*self.specs)
         for name in self.specs:
             with open(self.path / EPISODES_DIR / f"{name}.memmap", "rb+") as f:

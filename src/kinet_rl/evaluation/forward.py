@@ -54,13 +54,19 @@ def keypoint_accuracy(
     num_frames: int = 512,
     seed: int = 0,
 ) -> float:
-    """Fraction of objects with a detected keypoint within ``radius_px`` pixels, on random frames."""
+    """Fraction of objects in view with a detected keypoint within ``radius_px`` pixels.
+
+    Scored on ``num_frames`` random frames; an object whose centre projects outside the image is
+    not counted (no keypoint can sit on it).
+    """
     generator = torch.Generator().manual_seed(seed)
     batch = dataset.sample(num_frames, generator)
     pos, _ = model.detector(batch["pixels"].to(model_device(model)))
     pos = pos.cpu()
     kp_px = normalised_to_pixels(pos, geometry.image_size)
-    return keypoint_hit_rate(kp_px, geometry.objects_to_pixels(batch["object_pos"]), radius_px)
+    obj_px = geometry.objects_to_pixels(batch["object_pos"])
+    in_view = ((obj_px >= 0) & (obj_px <= geometry.image_size - 1)).all(dim=-1)
+    return keypoint_hit_rate(kp_px, obj_px, radius_px, counted=in_view)
 
 
 @torch.no_grad()

@@ -25,15 +25,21 @@ def pairwise_distance(a: Tensor, b: Tensor) -> Tensor:
     return (a.unsqueeze(-2) - b.unsqueeze(-3)).norm(dim=-1)
 
 
-def keypoint_hit_rate(kp_px: Tensor, obj_px: Tensor, radius_px: float = 4.0) -> float:
+def keypoint_hit_rate(
+    kp_px: Tensor, obj_px: Tensor, radius_px: float = 4.0, counted: Tensor | None = None
+) -> float:
     """Fraction of objects that have at least one keypoint within ``radius_px`` pixels.
 
     Args:
         kp_px: [*B, K, 2] keypoints in pixels.
         obj_px: [*B, N, 2] object centres in pixels.
+        radius_px: hit radius.
+        counted: optional [*B, N] bool mask of the objects to count (e.g. those in view).
     """
-    nearest = pairwise_distance(kp_px, obj_px).amin(dim=-2)  # [*B, N]
-    return (nearest <= radius_px).float().mean().item()
+    hits = pairwise_distance(kp_px, obj_px).amin(dim=-2) <= radius_px  # [*B, N]
+    if counted is None:
+        return hits.float().mean().item()
+    return (hits & counted).sum().item() / max(int(counted.sum().item()), 1)
 
 
 def keypoint_membership(kp: Tensor, obj: Tensor) -> Tensor:

@@ -56,15 +56,18 @@ def summary_images(model, dataset, geometry: SceneGeometry, seed: int = 0) -> di
     Returns:
         ``{"keypoints": ..., "reconstruction": ...}`` uint8 images. The overlay row shows detected
         keypoints (coloured circles) on ``I_t``; the grid's rows are ``I_t``, its reconstruction
-        ``f_rec(I_0, x_0, x_t)``, the predicted next frame ``f_rec(I_0, x_0, x_hat_t+1)`` and the
-        true next frame ``I_t+1``.
+        ``f_rec(I_0, I_t)`` (training objective), the predicted next frame ``f_rec(I_0, x_0,
+        x_hat_t+1)`` (rendered from keypoints alone) and the true next frame ``I_t+1``.
     """
     model.eval()
     batch = dataset.sample(SUMMARY_FRAMES, torch.Generator().manual_seed(seed))
     batch = batch.to(model_device(model))
-    pos, feat = model.detector(batch["pixels"])
-    next_pos = model.interaction(pos, feat, batch["action"]).next_pos
-    rebuilt = model.predict_pixels(batch["pixels_0"], pos)
+    source, observed = model.detector.encode(torch.cat([batch["pixels_0"], batch["pixels"]])).split(
+        SUMMARY_FRAMES
+    )
+    pos = observed.pos
+    rebuilt = (model.reconstructor(source, observed) + 0.5).clamp(0.0, 1.0)
+    next_pos = model.interaction(pos, observed.feat, batch["action"]).next_pos
     predicted = model.predict_pixels(batch["pixels_0"], next_pos)
     kp_px = normalised_to_pixels(pos, geometry.image_size)
     batch, kp_px, rebuilt, predicted = batch.cpu(), kp_px.cpu(), rebuilt.cpu(), predicted.cpu()
@@ -157,7 +160,7 @@ class TrainingReport:
         images = "\n".join(f"![{p.stem}](images/{p.name})" for p in paths)
         text = (
             f"# {self.exp_name}: KINet after {step} steps\n\n"
-            f"Held-out test episodes. **Keypoint accuracy: {100 * accuracy:.1f}%** of objects have a "
+            f"Held-out test episodes. **Keypoint accuracy: {100 * accuracy:.1f}%** of the objects in view have a "
             f"detected keypoint within {radius:.1f} px of their centre.\n\n"
             "Forward prediction: open-loop rollouts of the logged pushes; object positions read off "
             "the keypoints (each object follows the keypoints nearest to it in the start frame; "

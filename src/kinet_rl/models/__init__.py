@@ -23,7 +23,7 @@ __all__ = [
     "KeypointInteractionNet",
     "KeypointReconstructor",
     "KeypointTransform",
-        "TransitionOutputs",
+    "TransitionOutputs",
     "edge_geometry",
     "graph_info_nce",
     "graph_similarity",

@@ -132,14 +132,20 @@ class KeypointInteractionNet(nn.Module):
         self.deterministic = deterministic
         self.node_encoder = mlp(feat_dim + 2, embed_dim, hidden_dim, num_hidden)
         self.edge_encoder = mlp(3, embed_dim, hidden_dim, num_hidden)
-        self.edge_posterior = None if deterministic else mlp(2 * embed_dim, 2, hidden_dim, num_hidden)
+        self.edge_posterior = (
+            None if deterministic else mlp(2 * embed_dim, 2, hidden_dim, num_hidden)
+        )
         self.edge_update = mlp(3 * embed_dim, embed_dim, hidden_dim, num_hidden)
         self.node_update = mlp(2 * embed_dim + 2 * ACTION_DIM, embed_dim, hidden_dim, num_hidden)
         self.state_decoder = mlp(embed_dim, 2, hidden_dim, num_hidden)
 
     def embed_nodes(self, pos: Tensor, feat: Tensor) -> Tensor:
         """Node embeddings ``n_k`` of the graph ``[phi_k, x_k]``: ``[*B, K, D], [*B, K, 2] -> [*B, K, E]``."""
-        if feat.shape[-1] != self.feat_dim or pos.shape[-1] != 2 or pos.shape[:-1] != feat.shape[:-1]:
+        if (
+            feat.shape[-1] != self.feat_dim
+            or pos.shape[-1] != 2
+            or pos.shape[:-1] != feat.shape[:-1]
+        ):
             raise ValueError(
                 f"Expected pos [*B, K, 2] and feat [*B, K, {self.feat_dim}], got "
                 f"{tuple(pos.shape)} and {tuple(feat.shape)}."

@@ -111,6 +111,11 @@ class EncodedFrames:
     fine: Tensor
     coarse: Tensor
 
+    def split(self, size: int) -> tuple[EncodedFrames, ...]:
+        """Splits the batch into chunks of ``size`` frames."""
+        parts = (t.split(size) for t in (self.pos, self.feat, self.fine, self.coarse))
+        return tuple(EncodedFrames(*chunk) for chunk in zip(*parts, strict=True))
+
 
 class KeypointDetector(nn.Module):
     """Keypoint detector ``f_kp``: image -> ``K`` keypoints and a visual feature per keypoint.
@@ -137,7 +142,9 @@ class KeypointDetector(nn.Module):
         self.channels = channels
         fine_ch = fine_channels(channels)
         self.fine_net = nn.Sequential(_conv_block(3, fine_ch, 2), _conv_block(fine_ch, fine_ch))
-        self.coarse_net = nn.Sequential(_conv_block(fine_ch, channels, 2), _conv_block(channels, channels))
+        self.coarse_net = nn.Sequential(
+            _conv_block(fine_ch, channels, 2), _conv_block(channels, channels)
+        )
         self.heatmap_head = nn.Conv2d(channels, num_keypoints, 1)
         self.feat_head = nn.Linear(channels, feat_dim)
 
@@ -169,45 +176,70 @@ class KeypointDetector(nn.Module):
         )
 
 
-def transport(source: Tensor, pos_src: Tensor, pos_tgt: Tensor, std: float) -> Tensor:
-    """Moves source-frame features from ``pos_src`` to ``pos_tgt`` (Transporter with one frame).
+def _blob_masks(pos_src: Tensor, pos_tgt: Tensor, height: int, width: int, std: float):
+    """Gaussian blobs ``[N, K, H, W]`` at the target keypoints and the keep mask ``[N, 1, H, W]``.
 
-    Features under the Gaussian blobs at ``pos_src`` and ``pos_tgt`` are suppressed, and for each
-    keypoint the source map shifted by ``pos_tgt - pos_src`` is pasted under the blob at
-    ``pos_tgt``. With ``pos_tgt == pos_src`` the source map is returned up to blob blending.
+    The keep mask is 0 under every source and target blob, 1 far from all of them.
+    """
+    blob_src = gaussian_maps(pos_src, height, width, std)
+    blob_tgt = gaussian_maps(pos_tgt, height, width, std)
+    return blob_tgt, ((1 - blob_src) * (1 - blob_tgt)).prod(dim=1, keepdim=True)
+
+
+def transport(
+    source: Tensor, target: Tensor, pos_src: Tensor, pos_tgt: Tensor, std: float
+) -> Tensor:
+    """Transporter: source-frame features with target-frame features pasted at the keypoints.
+
+    ``(1 - H_src)(1 - H_tgt) source + H_tgt target``, per keypoint (Kulkarni et al. 2019). Used to
+    rebuild an observed frame: the keypoints learn to sit on whatever changed between the frames.
+
+    Args:
+        source: ``[N, C, H, W]`` features of the initial frame.
+        target: ``[N, C, H, W]`` features of the frame to rebuild.
+        pos_src: ``[N, K, 2]`` keypoints of the initial frame.
+        pos_tgt: ``[N, K, 2]`` keypoints of the frame to rebuild.
+        std: Blob standard deviation in ``[-1, 1]`` units.
+    """
+    blob_tgt, keep = _blob_masks(pos_src, pos_tgt, *source.shape[-2:], std)
+    return keep * source + blob_tgt.sum(dim=1, keepdim=True).clamp(max=1.0) * target
+
+
+def shift_transport(source: Tensor, pos_src: Tensor, pos_tgt: Tensor, std: float) -> Tensor:
+    """Moves source-frame features from ``pos_src`` to ``pos_tgt``: renders an unseen frame.
+
+    Like :func:`transport`, but the features pasted under keypoint ``k``'s target blob are the
+    source map shifted by ``pos_tgt[k] - pos_src[k]``, so only keypoints are needed (e.g. the
+    predicted ones). With ``pos_tgt == pos_src`` the source map is returned up to blob blending.
 
     Args:
         source: ``[N, C, H, W]`` features of the initial frame.
         pos_src: ``[N, K, 2]`` keypoints of the initial frame.
         pos_tgt: ``[N, K, 2]`` keypoints of the frame to render.
         std: Blob standard deviation in ``[-1, 1]`` units.
-
-    Returns:
-        ``[N, C, H, W]`` transported features.
     """
     n, c, h, w = source.shape
     k = pos_src.shape[1]
-    blob_src = gaussian_maps(pos_src, h, w, std)
-    blob_tgt = gaussian_maps(pos_tgt, h, w, std)
-    keep = ((1 - blob_src) * (1 - blob_tgt)).prod(dim=1, keepdim=True)  # [N, 1, H, W]
+    blob_tgt, keep = _blob_masks(pos_src, pos_tgt, h, w, std)
     grid = pixel_grid(h, w, source.device)  # [H, W, 2]
     shift = (pos_tgt - pos_src)[:, :, None, None, :]  # [N, K, 1, 1, 2]
     sample_at = (grid - shift).reshape(n * k, h, w, 2)
     shifted = F.grid_sample(
         source.repeat_interleave(k, dim=0), sample_at, align_corners=False, padding_mode="zeros"
     ).reshape(n, k, c, h, w)
-    pasted = (blob_tgt.unsqueeze(2) * shifted).sum(dim=1)
-    return keep * source + pasted
+    return keep * source + (blob_tgt.unsqueeze(2) * shifted).sum(dim=1)
 
 
 class KeypointReconstructor(nn.Module):
     """Reconstruction ``f_rec``: rebuilds ``I_t`` from ``I_0``'s features, ``x_0`` and ``x_t``.
 
-    The initial frame's encoder features at 1/4 and 1/2 resolution (from
-    :class:`KeypointDetector`) are transported from ``x_0`` to ``x_t`` (:func:`transport`); a conv
-    decoder upsamples the 1/4 level, joins the transported 1/2 level through a skip connection and
-    outputs the image by a sub-pixel (pixel shuffle) convolution. The image is produced from transported features only (never added to
-    ``I_0``), so the decoder cannot learn a copy-the-input shortcut that ignores the keypoints.
+    The encoder features (from :class:`KeypointDetector`) at 1/4 and 1/2 resolution are
+    transported, a conv decoder upsamples the 1/4 level, joins the 1/2 level through a skip
+    connection and outputs the image by a sub-pixel (pixel shuffle) convolution. The image comes
+    from transported features only (never added to ``I_0``), so the decoder cannot learn a
+    copy-the-input shortcut that ignores the keypoints. Training rebuilds an observed frame with
+    :func:`transport` (:meth:`forward`); predicted frames, for which only keypoints exist, are
+    rendered with :func:`shift_transport` (:meth:`render`).
 
     Reference: KINet, Rezazadeh et al., RA-L 2023, Sec. 3.1 and 3.4.
 
@@ -230,19 +262,29 @@ class KeypointReconstructor(nn.Module):
         # avoids full-resolution convolutions, the costliest part on CPU.
         self.to_rgb = nn.Sequential(nn.Conv2d(fine_ch, 12, 3, padding=1), nn.PixelShuffle(2))
 
-    def forward(self, source: EncodedFrames, pos_src: Tensor, pos_tgt: Tensor) -> Tensor:
-        """Renders the frame whose keypoints are ``pos_tgt``.
+    def decode(self, coarse: Tensor, fine: Tensor) -> Tensor:
+        """Transported ``[N, C, H/4, W/4]`` and ``[N, C/2, H/2, W/2]`` maps -> ``[N, H, W, 3]``."""
+        x = self.merge(torch.cat([self.up_coarse(coarse), fine], dim=1))
+        return self.to_rgb(x).permute(0, 2, 3, 1)
+
+    def forward(self, source: EncodedFrames, target: EncodedFrames) -> Tensor:
+        """Rebuilds observed frames from the initial frames and their own encodings.
 
         Args:
             source: Encoded initial frames (``N`` of them).
-            pos_src: ``[N, K, 2]`` keypoints of the initial frames.
-            pos_tgt: ``[N, K, 2]`` keypoints of the frames to render.
+            target: Encoded frames to rebuild (``N``).
 
         Returns:
             ``[N, H, W, 3]`` image in the centred network space (add 0.5 for ``[0, 1]`` RGB).
         """
-        coarse = transport(source.coarse, pos_src, pos_tgt, self.std)
-        fine = transport(source.fine, pos_src, pos_tgt, self.std)
-        x = self.up_coarse(coarse)
-        x = self.merge(torch.cat([x, fine], dim=1))
-        return self.to_rgb(x).permute(0, 2, 3, 1)
+        return self.decode(
+            transport(source.coarse, target.coarse, source.pos, target.pos, self.std),
+            transport(source.fine, target.fine, source.pos, target.pos, self.std),
+        )
+
+    def render(self, source: EncodedFrames, pos_tgt: Tensor) -> Tensor:
+        """Renders the frames whose keypoints are ``pos_tgt`` ``[N, K, 2]`` (e.g. predicted ones)."""
+        return self.decode(
+            shift_transport(source.coarse, source.pos, pos_tgt, self.std),
+            shift_transport(source.fine, source.pos, pos_tgt, self.std),
+        )

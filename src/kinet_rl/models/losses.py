@@ -36,8 +36,8 @@ def graph_info_nce(predicted: Tensor, target: Tensor, temperature: float = 1.0) 
 class KINetLoss(LossModule):
     """Weighted KINet losses for a batch of transitions.
 
-    ``loss_rec``: mean squared error of ``f_rec`` rebuilding both ``I_t`` and ``I_t+1`` from
-    ``I_0`` and the detected keypoints (trains detector and reconstructor). ``loss_fwd``: mean over
+    ``loss_rec``: mean squared error of ``f_rec`` rebuilding ``I_t`` from ``I_0`` and the detected
+    keypoints (trains detector and reconstructor). ``loss_fwd``: mean over
     the batch of ``sum_k |x_hat_t+1 - f_kp(I_t+1)|^2`` with a detached target. ``loss_kl``: mean
     edge KL to the prior. ``loss_ctr``: :func:`graph_info_nce` between predicted next node
     embeddings and the node embeddings of the detected (detached) next graph. Each entry is

@@ -63,6 +63,12 @@ class KeypointTransform(Transform):
 
     def transform_observation_spec(self, observation_spec: Composite) -> Composite:
         """Adds the keypoint position and feature specs (float32, unbounded)."""
+        if self.in_keys[0] not in observation_spec.keys(True):
+            raise KeyError(
+                f"KeypointTransform found no image spec at {self.in_keys[0]!r} (observations: "
+                f"{list(observation_spec.keys(True, True))}); create the env with pixel "
+                "observations or pass in_keys= naming the image entry."
+            )
         image_spec = observation_spec[self.in_keys[0]]
         batch = image_spec.shape[:-3]
         k, d = self.detector.num_keypoints, self.detector.feat_dim

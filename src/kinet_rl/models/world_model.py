@@ -30,10 +30,10 @@ class TransitionOutputs:
 
     Attributes:
         pos: ``[B, K, 2]`` detected ``x_t`` (with gradient to the detector).
-        next_pos: ``[B, K, 2]`` detected ``x_t+1`` (with gradient to the detector).
-        next_feat: ``[B, K, D]`` detected ``phi_t+1``.
-        reconstruction: ``[2B, H, W, 3]`` ``f_rec`` of ``I_t`` then ``I_t+1`` (centred space).
-        target: ``[2B, H, W, 3]`` ``I_t`` then ``I_t+1`` in the same centred space.
+        next_pos: ``[B, K, 2]`` detected ``x_t+1`` (no gradient: a forward-model target).
+        next_feat: ``[B, K, D]`` detected ``phi_t+1`` (no gradient).
+        reconstruction: ``[B, H, W, 3]`` ``f_rec(I_0, I_t)`` in the centred space (paper Sec. 3.1).
+        target: ``[B, H, W, 3]`` ``I_t`` in the same centred space.
         prediction: Interaction-net output from the detached ``(x_t, phi_t)`` and the action.
     """
 
@@ -128,34 +128,28 @@ class KINetWorldModel(nn.Module):
             tensordict: ``[B]`` batch with ``PIXELS_0``, ``PIXELS``, ``ACTION`` and
                 ``("next", PIXELS)``; images ``[B, H, W, 3]`` uint8 or float in ``[0, 1]``.
         """
-        try:
-            first = tensordict.get(PIXELS_0)
-            current = tensordict.get(PIXELS)
-            following = tensordict.get(("next", PIXELS))
-            action = tensordict.get(ACTION)
-        except KeyError as err:
+        needed = (PIXELS_0, PIXELS, ("next", PIXELS), ACTION)
+        missing = [key for key in needed if tensordict.get(key, None) is None]
+        if missing:
             raise KeyError(
-                f"A KINet training batch needs {PIXELS_0!r}, {PIXELS!r}, {ACTION!r} and "
-                f"('next', {PIXELS!r}); missing: {err}."
-            ) from err
+                f"A KINet training batch needs {PIXELS_0!r}, {PIXELS!r}, ('next', {PIXELS!r}) and "
+                f"{ACTION!r}; missing: {missing}. Sample batches with PushDataset.sample()."
+            )
+        first, current, following, action = (tensordict.get(key) for key in needed)
         if not first.shape == current.shape == following.shape or first.dim() != 4:
             raise ValueError(
                 "pixels_0, pixels and ('next', 'pixels') must share one [B, H, W, 3] shape; got "
                 f"{tuple(first.shape)}, {tuple(current.shape)}, {tuple(following.shape)}."
             )
         batch = first.shape[0]
-        enc = self.detector.encode(torch.cat([first, current, following]))  # one pass: 3B frames
-        pos_0, pos, next_pos = enc.pos.split(batch)
-        feat, next_feat = enc.feat[batch:].split(batch)
-        source = type(enc)(
-            pos=pos_0.repeat(2, 1, 1),
-            feat=enc.feat[:batch].repeat(2, 1, 1),
-            fine=enc.fine[:batch].repeat(2, 1, 1, 1),
-            coarse=enc.coarse[:batch].repeat(2, 1, 1, 1),
-        )
-        reconstruction = self.reconstructor(source, source.pos, torch.cat([pos, next_pos]))
-        target = pixels_to_input(torch.cat([current, following])).permute(0, 2, 3, 1)
-        prediction = self.interaction(pos.detach(), feat.detach(), action)
+        enc = self.detector.encode(torch.cat([first, current]))  # one pass: 2B frames
+        source, observed = enc.split(batch)
+        with torch.no_grad():  # forward-model targets only: detached anyway (paper Sec. 3.5)
+            following_enc = self.detector.encode(following)
+        reconstruction = self.reconstructor(source, observed)
+        target = pixels_to_input(current).permute(0, 2, 3, 1)
+        prediction = self.interaction(observed.pos.detach(), observed.feat.detach(), action)
+        pos, next_pos, next_feat = observed.pos, following_enc.pos, following_enc.feat
         return TransitionOutputs(pos, next_pos, next_feat, reconstruction, target, prediction)
 
     @torch.no_grad()
@@ -170,9 +164,11 @@ class KINetWorldModel(nn.Module):
             ``[B, H, W, 3]`` float images in ``[0, 1]``.
         """
         source = self.detector.encode(pixels_0)
-        return (self.reconstructor(source, source.pos, pos) + 0.5).clamp(0.0, 1.0)
+        return (self.reconstructor.render(source, pos) + 0.5).clamp(0.0, 1.0)
 
-    def save_checkpoint(self, path: str | os.PathLike, config: dict[str, Any] | None = None) -> None:
+    def save_checkpoint(
+        self, path: str | os.PathLike, config: dict[str, Any] | None = None
+    ) -> None:
         """Atomically writes weights, the constructor config and optional run ``config`` metadata."""
         state = {
             "format": CHECKPOINT_FORMAT,
@@ -212,7 +208,9 @@ class KINetWorldModel(nn.Module):
             if stored.get(key, "<missing>") != value
         }
         if diffs:
-            detail = ", ".join(f"{k}: expected {e!r}, checkpoint {s!r}" for k, (e, s) in diffs.items())
+            detail = ", ".join(
+                f"{k}: expected {e!r}, checkpoint {s!r}" for k, (e, s) in diffs.items()
+            )
             raise CheckpointError(
                 f"Checkpoint {path} does not match the requested model config ({detail}); "
                 "use a checkpoint trained with these settings or change the config to match."

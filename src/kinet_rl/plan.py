@@ -1,0 +1,102 @@
+"""Next push for a real robot: ``python -m kinet_rl.plan --checkpoint kinet.pt --image now.png --goal goal.png``.
+
+Prints one JSON object: the push start and end in metres (table frame, origin at the workspace
+centre, +x right and +y up in the top camera image) and normalised to ``[-1, 1]``. Images must
+come from the camera and resolution the model was trained on. The planner's warm start lives
+only within one process: for closed-loop control call :class:`kinet_rl.control.PushPlanner`
+from Python (see docs/planning.md), or pass several ``--image`` files to plan a push for each in
+turn, as if executed one after another.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+from kinet_rl.control.robot import PushPlanner
+from kinet_rl.envs.workspace import WORKSPACES
+from kinet_rl.models import KINetWorldModel
+
+logger = logging.getLogger(__name__)
+
+
+def read_image(path: Path, size: int | None = None) -> np.ndarray:
+    """An RGB uint8 ``[H, W, 3]`` image, resized to ``size`` x ``size`` if given."""
+    if not path.is_file():
+        raise FileNotFoundError(f"Image {path} does not exist.")
+    image = Image.open(path).convert("RGB")
+    if size is not None and image.size != (size, size):
+        image = image.resize((size, size), Image.Resampling.BILINEAR)
+    return np.asarray(image)
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    """Command-line arguments."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--checkpoint", type=Path, required=True, help="kinet.pt of a run")
+    parser.add_argument("--image", type=Path, nargs="+", required=True, help="current image(s)")
+    parser.add_argument("--goal", type=Path, required=True, help="goal image")
+    parser.add_argument(
+        "--workspace-half-size",
+        type=float,
+        default=None,
+        help="metres; default from the checkpoint's env task (0.20 blocks, 0.30 ycb)",
+    )
+    parser.add_argument(
+        "--image-size",
+        type=int,
+        default=None,
+        help="resize images to this square size (default: the checkpoint's env)",
+    )
+    parser.add_argument("--reward", choices=("graph", "keypoints"), default="graph")
+    parser.add_argument("--horizon", type=int, default=1)
+    parser.add_argument("--candidates", type=int, default=256)
+    parser.add_argument("--iterations", type=int, default=5)
+    parser.add_argument("--top-k", type=int, default=32)
+    parser.add_argument("--seed", type=int, default=0)
+    return parser.parse_args(argv)
+
+
+def _env_config(checkpoint: Path) -> dict:
+    from kinet_rl.atomic import safe_torch_load
+
+    config = safe_torch_load(checkpoint, ("config",), "KINetWorldModel.save_checkpoint")["config"]
+    return dict(config.get("env") or {})
+
+
+def main(argv: Sequence[str] | None = None) -> list[dict]:
+    """Plans one push per ``--image`` and prints each as a JSON line."""
+    args = parse_args(argv)
+    env_cfg = _env_config(args.checkpoint)
+    half_size = args.workspace_half_size or WORKSPACES[env_cfg.get("task", "blocks")].half_size
+    size = args.image_size or env_cfg.get("image_size")
+    model = KINetWorldModel.from_checkpoint(args.checkpoint)
+    planner = PushPlanner(
+        model,
+        half_size,
+        reward=args.reward,
+        seed=args.seed,
+        planning_horizon=args.horizon,
+        num_candidates=args.candidates,
+        optim_steps=args.iterations,
+        top_k=args.top_k,
+    )
+    goal = read_image(args.goal, size)
+    pushes = []
+    for path in args.image:
+        push = planner.next_push(read_image(path, size), goal).as_dict()
+        pushes.append({"image": str(path), **push})
+        sys.stdout.write(json.dumps(pushes[-1]) + "\n")
+    return pushes
+
+
+if __name__ == "__main__":
+    logging.basicConfig(level=logging.INFO)
+    main()

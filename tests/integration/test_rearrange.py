@@ -1,0 +1,172 @@
+"""Rearrangement in the MuJoCo simulator: episodes, oracle vs random, report and CLIs (slow)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from PIL import Image
+
+from kinet_rl import plan
+from kinet_rl.control.evaluation import RearrangementSettings, evaluate_rearrangement
+from kinet_rl.control.rearrange import (
+    OracleController,
+    RandomController,
+    SceneSettings,
+    TaskSettings,
+    make_episode,
+    mean_goal_distance,
+    run_episode,
+)
+from kinet_rl.evaluate import evaluate
+from kinet_rl.models import KINetWorldModel
+
+pytestmark = pytest.mark.slow
+
+CONF = Path(__file__).resolve().parents[2] / "conf"
+SCENE = SceneSettings(image_size=32)
+ORACLE = {"planning_horizon": 1, "optim_steps": 5, "num_candidates": 256, "top_k": 16}
+
+
+def tiny_model() -> KINetWorldModel:
+    torch.manual_seed(0)
+    return KINetWorldModel(
+        num_keypoints=4,
+        feat_dim=4,
+        channels=8,
+        embed_dim=8,
+        hidden_dim=16,
+        num_hidden=1,
+        num_rounds=1,
+    )
+
+
+def test_episode_goal_is_reproducible_reachable_and_start_restored() -> None:
+    task = TaskSettings(goal_pushes=3, min_goal_distance=0.02)
+    first, second = make_episode(SCENE, task, 5), make_episode(SCENE, task, 5)
+    try:
+        np.testing.assert_array_equal(first.goal_pos, second.goal_pos)
+        np.testing.assert_array_equal(first.goal_pixels, second.goal_pixels)
+        assert mean_goal_distance(first.start["object_pos"], first.goal_pos) >= 0.02
+        pos, _ = first.env.task.object_poses(first.env.physics)  # physics is back at the start
+        np.testing.assert_allclose(pos, first.start["object_pos"], atol=1e-6)
+    finally:
+        first.close()
+        second.close()
+
+
+def test_oracle_mpc_beats_random_pushes_in_the_simulator() -> None:
+    task = TaskSettings(num_steps=10)
+    finals: dict[str, list[float]] = {"oracle": [], "random": []}
+    initial = []
+    for seed in range(3):
+        for method in finals:
+            episode = make_episode(SCENE, task, seed)
+            controller = (
+                OracleController(SCENE, ORACLE, 0.035, seed)
+                if method == "oracle"
+                else RandomController(seed)
+            )
+            result = run_episode(episode, controller, method, task)
+            episode.close()
+            finals[method].append(result.distances[-1])
+        initial.append(result.distances[0])
+    assert np.mean(finals["oracle"]) < 0.5 * np.mean(initial)
+    assert np.mean(finals["oracle"]) < 0.5 * np.mean(finals["random"])
+
+
+def test_evaluate_rearrangement_writes_plot_markdown_json_and_video(tmp_path: Path) -> None:
+    settings = RearrangementSettings(
+        scene=SCENE,
+        task=TaskSettings(num_steps=3),
+        episodes=2,
+        workers=2,
+        planner={"planning_horizon": 1, "optim_steps": 2, "num_candidates": 16, "top_k": 4},
+        num_objects=(2,),
+        geometries=("gen",),
+        backgrounds=("random",),
+        generalization_episodes=1,
+    )
+    out = evaluate_rearrangement(tiny_model(), settings, tmp_path, generalization=True)
+    summary = out["summary"]
+    assert set(summary) == {"comparison", "n2_geom_gen", "background_random"}
+    assert set(summary["comparison"]) == set(settings.methods)
+    for stats in summary["comparison"].values():
+        assert stats["episodes"] == 2 and len(stats["mean_curve"]) == 4
+    # Same episodes for every method: identical start distances.
+    starts = {round(s["mean_curve"][0], 9) for s in summary["comparison"].values()}
+    assert len(starts) == 1
+    with Image.open(tmp_path / "rearrangement.png") as plot_image:
+        assert plot_image.size[0] > 100
+    assert "| N | geom_gen |" in (tmp_path / "rearrangement.md").read_text()
+    assert (
+        json.loads((tmp_path / "rearrangement.json").read_text())["summary"].keys()
+        == summary.keys()
+    )
+    video = iio.imread(tmp_path / f"rearrangement_seed{settings.seed}.gif")
+    assert 1 <= video.shape[0] <= 4  # T + 1 frames (the GIF writer merges identical ones)
+    assert video.shape[2] > 2 * video.shape[1] * 0.9
+
+
+def test_plan_cli_prints_pushes_in_metres(tmp_path: Path, capsys) -> None:
+    checkpoint = tmp_path / "kinet.pt"
+    tiny_model().save_checkpoint(checkpoint, config={"env": {"task": "blocks", "image_size": 32}})
+    episode = make_episode(SCENE, TaskSettings(), 0)
+    try:
+        Image.fromarray(episode.start["pixels"]).save(tmp_path / "now.png")
+        Image.fromarray(episode.goal_pixels).resize((64, 64)).save(tmp_path / "goal.png")
+    finally:
+        episode.close()
+    pushes = plan.main(
+        [
+            "--checkpoint",
+            str(checkpoint),
+            "--image",
+            str(tmp_path / "now.png"),
+            str(tmp_path / "now.png"),
+            "--goal",
+            str(tmp_path / "goal.png"),
+            "--candidates",
+            "16",
+            "--iterations",
+            "2",
+            "--top-k",
+            "4",
+        ]
+    )
+    lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert lines == pushes and len(lines) == 2
+    for push in lines:
+        assert push["start_xy_m"] == pytest.approx([0.2 * v for v in push["normalised"][:2]])
+        assert push["end_xy_m"] == pytest.approx([0.2 * v for v in push["normalised"][2:]])
+
+
+def test_evaluate_entry_point_composes_eval_group(tmp_path: Path) -> None:
+    checkpoint = tmp_path / "kinet.pt"
+    tiny_model().save_checkpoint(checkpoint)
+    overrides = [
+        "+eval=rearrange",
+        f"+checkpoint={checkpoint}",
+        "env.image_size=32",
+        "eval.episodes=1",
+        "eval.num_steps=2",
+        "eval.num_objects=[1]",
+        "eval.geometries=[train]",
+        "eval.backgrounds=[]",
+        "eval.workers=1",
+        "eval.methods=[kinet_graph,random]",
+        "eval.generalization_episodes=1",
+        "eval.planner.num_candidates=8",
+        "eval.planner.top_k=2",
+        "eval.planner.optim_steps=1",
+    ]
+    with initialize_config_dir(str(CONF), version_base="1.3"):
+        cfg = compose("config", overrides=overrides)
+    summary = evaluate(cfg, tmp_path)["summary"]
+    assert set(summary) == {"comparison", "n1_geom_train"}
+    assert (tmp_path / "rearrangement" / "rearrangement.md").is_file()
