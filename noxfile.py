@@ -15,6 +15,9 @@ nox.options.sessions = ["tests"]
 
 CONSTRAINTS = ("-c", "ci/constraints.txt")
 RENDER_ENV = {"MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+# Tests run single-threaded: seeded learning tests then give the same numbers on any machine, and
+# parallel workers (collectors, torchrun) do not oversubscribe the cores.
+TEST_ENV = {**RENDER_ENV, "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1")}
 
 
 def _install(session: nox.Session, extras: str = "test") -> None:
@@ -25,14 +28,14 @@ def _install(session: nox.Session, extras: str = "test") -> None:
 def tests(session: nox.Session) -> None:
     """Unit and integration tests (the README's test command; what CI runs)."""
     _install(session)
-    session.run("pytest", "tests", *session.posargs, env=RENDER_ENV)
+    session.run("pytest", "tests", *session.posargs, env=TEST_ENV)
 
 
 @nox.session
 def tests_fast(session: nox.Session) -> None:
     """Unit tests only: CPU, no rendering, seconds."""
     _install(session)
-    session.run("pytest", "tests/unit", *session.posargs, env=RENDER_ENV)
+    session.run("pytest", "tests/unit", *session.posargs, env=TEST_ENV)
 
 
 @nox.session

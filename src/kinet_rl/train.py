@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import Any, cast
 
 import hydra
 import torch
@@ -21,6 +22,7 @@ from kinet_rl.atomic import atomic_write_json
 from kinet_rl.collect import collect_all
 from kinet_rl.data import load_dataset
 from kinet_rl.evaluation.report import TrainingReport
+from kinet_rl.models import KINetWorldModel
 from kinet_rl.training.checkpoint import TrainingCheckpoint
 from kinet_rl.training.distributed import init_distributed
 from kinet_rl.training.loggers import make_logger
@@ -68,7 +70,7 @@ def train(cfg: DictConfig, run_dir: Path) -> dict:
         loss,
         data["train"],
         data["val"],
-        TrainerSettings(**OmegaConf.to_container(cfg.trainer, resolve=True)),
+        TrainerSettings(**cast(dict[str, Any], OmegaConf.to_container(cfg.trainer, resolve=True))),
         checkpoint,
         logger,
         ctx,
@@ -79,7 +81,8 @@ def train(cfg: DictConfig, run_dir: Path) -> dict:
     trainer.fit()
     if not ctx.is_main:
         return {}
-    model.save_checkpoint(run_dir / "kinet.pt", config=OmegaConf.to_container(cfg, resolve=True))
+    name = "kinet.pt" if isinstance(model, KINetWorldModel) else "model.pt"
+    model.save_checkpoint(run_dir / name, config=OmegaConf.to_container(cfg, resolve=True))
     results = {**report.final(trainer.step), "world_size": ctx.world_size}
     atomic_write_json(run_dir / "results.json", results)
     return results

@@ -10,8 +10,13 @@ from pathlib import Path
 
 import pytest
 import torch
+from omegaconf import OmegaConf
 
 from kinet_rl.atomic import CheckpointError
+from kinet_rl.baselines import ObjectCountError, ObjectInteractionModel
+from kinet_rl.data import load_dataset
+from kinet_rl.evaluation.forward import forward_errors
+from kinet_rl.evaluation.report import scene_geometry
 from kinet_rl.models import KINetWorldModel
 
 pytestmark = pytest.mark.slow
@@ -27,7 +32,6 @@ def run_train(tmp: Path, *overrides: str, launcher: tuple[str, ...] = ("-m",)) -
         "kinet_rl.train",
         "+exp=smoke",
         f"data.root={tmp / 'data'}",
-        "data.generalization=null",
         f"hydra.run.dir={tmp / 'run'}",
         *overrides,
     ]
@@ -40,7 +44,7 @@ def run_train(tmp: Path, *overrides: str, launcher: tuple[str, ...] = ("-m",)) -
 @pytest.fixture(scope="module")
 def smoke_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     tmp = tmp_path_factory.mktemp("train")
-    output = run_train(tmp)
+    output = run_train(tmp)  # also collects smoke_2obj, a 2-object generalization set
     assert "Keypoint accuracy" in output  # the report is printed at the end
     return tmp
 
@@ -68,7 +72,7 @@ def test_rerun_resumes_and_longer_run_continues(smoke_run: Path) -> None:
 def test_other_experiment_in_same_run_dir_is_refused(smoke_run: Path) -> None:
     command = [
         sys.executable, "-m", "kinet_rl.train", "+exp=smoke", f"data.root={smoke_run / 'data'}",
-        "data.generalization=null", f"hydra.run.dir={smoke_run / 'run'}", "model.num_keypoints=4",
+        f"hydra.run.dir={smoke_run / 'run'}", "model.num_keypoints=4",
     ]  # fmt: skip
     result = subprocess.run(command, cwd=REPO, capture_output=True, text=True, timeout=300)
     assert result.returncode != 0
@@ -85,9 +89,32 @@ def test_torchrun_two_cpu_processes(tmp_path: Path) -> None:
     run_train(
         tmp_path,
         "device=cpu",
+        "data.generalization=null",
         launcher=("-m", "torch.distributed.run", "--nproc_per_node=2", "--master_port=29517", "-m"),
     )
     results = json.loads((tmp_path / "run" / "results.json").read_text())
     assert results["world_size"] == 2
     state = torch.load(tmp_path / "run" / "checkpoints" / "last.pt", weights_only=True)
     assert state["step"] == 6
+
+
+def test_baseline_trains_through_the_same_pipeline(smoke_run: Path) -> None:
+    run_train(smoke_run, "model=in", "loss=in", f"hydra.run.dir={smoke_run / 'run_in'}")
+    results = json.loads((smoke_run / "run_in" / "results.json").read_text())
+    assert results["model"] == "ObjectInteractionModel" and results["step"] == 6
+    assert ObjectInteractionModel.from_checkpoint(smoke_run / "run_in" / "model.pt")
+
+
+def test_kinet_takes_other_object_counts_and_in_refuses_them(smoke_run: Path) -> None:
+    two_objects = load_dataset(smoke_run / "data" / "smoke_2obj", "all")
+    kinet = KINetWorldModel.from_checkpoint(smoke_run / "run" / "kinet.pt")
+    geometry = scene_geometry(
+        OmegaConf.create({"task": "blocks", "camera": "top", "image_size": 32})
+    )
+    errors = forward_errors(kinet.object_rollout(geometry), two_objects, (1,), num_sequences=4)
+    assert errors[1]["model"] >= 0.0
+    trained_on_three = ObjectInteractionModel(num_objects=3)
+    with pytest.raises(ObjectCountError, match="3"):
+        forward_errors(
+            trained_on_three.object_rollout(geometry), two_objects, (1,), num_sequences=4
+        )

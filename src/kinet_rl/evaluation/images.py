@@ -37,7 +37,7 @@ def draw_keypoints(image: Tensor | np.ndarray, kp_px: Tensor, scale: int = 4) ->
         scale: integer upscaling so that small images stay readable.
     """
     base = Image.fromarray(to_uint8_image(image))
-    base = base.resize((base.width * scale, base.height * scale), Image.NEAREST)
+    base = base.resize((base.width * scale, base.height * scale), Image.Resampling.NEAREST)
     draw = ImageDraw.Draw(base)
     radius = max(2, scale)
     for k, (x, y) in enumerate(kp_px.detach().cpu().tolist()):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -12,7 +13,6 @@ from omegaconf import DictConfig
 
 from kinet_rl.atomic import atomic_write_text
 from kinet_rl.evaluation.forward import (
-    KeypointObjectRollout,
     SceneGeometry,
     forward_errors,
     forward_table,
@@ -105,7 +105,7 @@ class TrainingReport:
 
     run_dir: Path
     exp_name: str
-    model: torch.nn.Module
+    model: Any
     val: object
     test: object
     geometry: SceneGeometry
@@ -128,6 +128,15 @@ class TrainingReport:
             settings.num_sequences,
         )
 
+    @property
+    def has_keypoints(self) -> bool:
+        """Whether the model is a keypoint model (KINet); baselines get forward errors only."""
+        return hasattr(self.model, "detector") and hasattr(self.model, "reconstructor")
+
+    @property
+    def model_name(self) -> str:
+        return "KINet" if self.has_keypoints else type(self.model).__name__
+
     def accuracy(self, dataset) -> float:
         return keypoint_accuracy(
             self.model, dataset, self.geometry, hit_radius(self.geometry.image_size)
@@ -135,38 +144,43 @@ class TrainingReport:
 
     def on_validate(self, step: int) -> dict[str, float]:
         """Keypoint accuracy on validation frames, and image summaries of the step."""
+        if not self.has_keypoints:
+            return {}
         write_summaries(self.run_dir, self.model, self.val, self.geometry, f"step{step:06d}")
         return {"val/keypoint_accuracy": self.accuracy(self.val)}
 
     def final(self, step: int) -> dict:
         """Evaluates on the test split, writes ``report.md`` and final images; returns the numbers."""
         self.model.eval()
-        radius = hit_radius(self.geometry.image_size)
-        accuracy = self.accuracy(self.test)
-        rollout = KeypointObjectRollout(self.model, self.geometry)
+        rollout = self.model.object_rollout(self.geometry)
         errors = forward_errors(rollout, self.test, self.horizons, self.num_sequences)
-        image_mse = image_prediction_errors(
-            self.model, self.test, self.horizons, self.num_sequences
-        )
-        paths = write_summaries(self.run_dir, self.model, self.test, self.geometry, "final")
-        results = {
+        results: dict = {
             "step": step,
-            "keypoint_accuracy": accuracy,
-            "hit_radius_px": radius,
+            "model": self.model_name,
             "forward_error_m": {h: e["model"] for h, e in errors.items()},
             "no_motion_error_m": {h: e["no_motion"] for h, e in errors.items()},
-            "image_mse": image_mse,
         }
-        images = "\n".join(f"![{p.stem}](images/{p.name})" for p in paths)
-        text = (
-            f"# {self.exp_name}: KINet after {step} steps\n\n"
-            f"Held-out test episodes. **Keypoint accuracy: {100 * accuracy:.1f}%** of the objects in view have a "
-            f"detected keypoint within {radius:.1f} px of their centre.\n\n"
-            "Forward prediction: open-loop rollouts of the logged pushes; object positions read off "
-            "the keypoints (each object follows the keypoints nearest to it in the start frame; "
-            "see kinet_rl.evaluation.forward), errors in millimetres on the table.\n\n"
-            f"{forward_table(errors, image_mse)}\n\n{images}\n"
+        sections = [f"# {self.exp_name}: {self.model_name} after {step} steps\n"]
+        image_mse = None
+        if self.has_keypoints:
+            radius = hit_radius(self.geometry.image_size)
+            accuracy = self.accuracy(self.test)
+            image_mse = image_prediction_errors(
+                self.model, self.test, self.horizons, self.num_sequences
+            )
+            results.update(keypoint_accuracy=accuracy, hit_radius_px=radius, image_mse=image_mse)
+            sections.append(
+                f"Held-out test episodes. **Keypoint accuracy: {100 * accuracy:.1f}%** of the "
+                f"objects in view have a detected keypoint within {radius:.1f} px of their centre.\n"
+            )
+        sections.append(
+            "Forward prediction on held-out test episodes: open-loop rollouts of the logged "
+            "pushes, errors in millimetres on the table (protocol: docs/kinet.md).\n"
         )
-        atomic_write_text(self.run_dir / "report.md", text)
+        sections.append(forward_table(errors, image_mse, self.model_name) + "\n")
+        if self.has_keypoints:
+            paths = write_summaries(self.run_dir, self.model, self.test, self.geometry, "final")
+            sections.append("\n".join(f"![{p.stem}](images/{p.name})" for p in paths) + "\n")
+        atomic_write_text(self.run_dir / "report.md", "\n".join(sections))
         log.info("Wrote %s", self.run_dir / "report.md")
         return results

@@ -201,7 +201,8 @@ def transport(
         pos_tgt: ``[N, K, 2]`` keypoints of the frame to rebuild.
         std: Blob standard deviation in ``[-1, 1]`` units.
     """
-    blob_tgt, keep = _blob_masks(pos_src, pos_tgt, *source.shape[-2:], std)
+    height, width = source.shape[-2:]
+    blob_tgt, keep = _blob_masks(pos_src, pos_tgt, height, width, std)
     return keep * source + blob_tgt.sum(dim=1, keepdim=True).clamp(max=1.0) * target
 
 

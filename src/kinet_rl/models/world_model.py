@@ -15,6 +15,7 @@ from tensordict import TensorDictBase
 from torch import Tensor, nn
 
 from kinet_rl.atomic import CheckpointError, atomic_torch_save, safe_torch_load
+from kinet_rl.evaluation.forward import KeypointObjectRollout, SceneGeometry
 from kinet_rl.keys import ACTION, KP_FEAT, KP_NODE_EMB, KP_POS, PIXELS, PIXELS_0
 from kinet_rl.models.interaction import GraphPrediction, KeypointInteractionNet
 from kinet_rl.models.keypoints import KeypointDetector, KeypointReconstructor, pixels_to_input
@@ -165,6 +166,10 @@ class KINetWorldModel(nn.Module):
         """
         source = self.detector.encode(pixels_0)
         return (self.reconstructor.render(source, pos) + 0.5).clamp(0.0, 1.0)
+
+    def object_rollout(self, geometry: SceneGeometry) -> KeypointObjectRollout:
+        """Object positions read off predicted keypoints, for forward-prediction evaluation."""
+        return KeypointObjectRollout(self, geometry)
 
     def save_checkpoint(
         self, path: str | os.PathLike, config: dict[str, Any] | None = None

@@ -210,4 +210,3 @@ class Trainer:
         if not scores:
             scores = self.validate()
         return scores
-

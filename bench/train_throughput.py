@@ -1,0 +1,144 @@
+"""Training throughput: samples/s of a ``KINetLoss`` step against a bare PyTorch loop.
+
+Usage: ``python bench/train_throughput.py [--image-size 64] [--batch 32] [--steps 5] [--rounds 3]``
+
+Both loops train the same model (default KINet sizes) on the same in-memory uint8 frames
+``[E, T+1, H, W, 3]``. kinet_rl's step is the Trainer's: gather a ``PushDataset``-style
+TensorDict batch, ``KINetLoss``, ``total_loss(...).backward()``, Adam. The bare loop gathers
+plain tensors and calls the detector, reconstructor and interaction net directly with the losses
+written inline (no TensorDict, no LossModule). CPU speed-up candidates are timed in the same
+run: channels-last weights, and encoding ``I_0`` without gradient (bare loop variant; it would
+change what the detector learns, so it is only measured). Variants run alternately for several
+rounds after a warm-up; medians are reported. The last line is ``ratio: X`` = kinet_rl
+samples/s over bare-loop samples/s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from collections.abc import Callable
+
+import torch
+from tensordict import TensorDict
+
+from kinet_rl.keys import ACTION, PIXELS, PIXELS_0
+from kinet_rl.models import KINetLoss, KINetWorldModel, graph_info_nce
+from kinet_rl.models.keypoints import pixels_to_input
+from kinet_rl.training.loop import total_loss
+
+EPISODES, PUSHES = 32, 10
+
+Step = Callable[[torch.Tensor, torch.Tensor], None]
+
+
+def kinet_rl_step(loss_module: KINetLoss, frames: torch.Tensor, actions: torch.Tensor) -> Step:
+    """The Trainer's step: TensorDict batch, ``KINetLoss``, backward, Adam."""
+    optimizer = torch.optim.Adam(loss_module.parameters(), lr=1e-3)
+
+    def step(episode: torch.Tensor, push: torch.Tensor) -> None:
+        times = torch.stack([torch.zeros_like(push), push, push + 1], dim=1)
+        batch = frames[episode[:, None], times]
+        td = TensorDict(
+            {
+                PIXELS_0: batch[:, 0],
+                PIXELS: batch[:, 1],
+                ACTION: actions[episode, push],
+                "next": {PIXELS: batch[:, 2]},
+            },
+            batch_size=[len(episode)],
+        )
+        losses = loss_module(td)
+        optimizer.zero_grad(set_to_none=True)
+        total_loss(losses).backward()
+        optimizer.step()
+
+    return step
+
+
+def bare_step(
+    model: KINetWorldModel, frames: torch.Tensor, actions: torch.Tensor, source_grad: bool = True
+) -> Step:
+    """The same losses written inline on plain tensors (weights 1, 1, 0.01, 0.1)."""
+    optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
+    det, rec, net = model.detector, model.reconstructor, model.interaction
+
+    def step(episode: torch.Tensor, push: torch.Tensor) -> None:
+        times = torch.stack([torch.zeros_like(push), push, push + 1], dim=1)
+        batch = frames[episode[:, None], times]
+        n = len(episode)
+        if source_grad:
+            source, observed = det.encode(batch[:, :2].transpose(0, 1).flatten(0, 1)).split(n)
+        else:
+            with torch.no_grad():
+                source = det.encode(batch[:, 0])
+            observed = det.encode(batch[:, 1])
+        with torch.no_grad():
+            following = det.encode(batch[:, 2])
+        image = rec(source, observed)
+        target = pixels_to_input(batch[:, 1]).permute(0, 2, 3, 1)
+        pred = net(observed.pos.detach(), observed.feat.detach(), actions[episode, push])
+        loss_rec = (image - target).pow(2).mean()
+        loss_fwd = (pred.next_pos - following.pos).pow(2).sum(dim=(-2, -1)).mean()
+        nodes = net.embed_nodes(following.pos, following.feat)
+        loss_ctr = graph_info_nce(pred.next_nodes, nodes)
+        loss = loss_rec + loss_fwd + 0.01 * pred.kl.mean() + 0.1 * loss_ctr
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+
+    return step
+
+
+def samples_per_s(step: Step, steps: int, batch: int, gen: torch.Generator) -> float:
+    draws = [
+        (torch.randint(EPISODES, (batch,), generator=gen), torch.randint(PUSHES, (batch,), generator=gen))
+        for _ in range(steps)
+    ]
+    start = time.perf_counter()
+    for episode, push in draws:
+        step(episode, push)
+    return steps * batch / (time.perf_counter() - start)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--image-size", type=int, default=64)
+    parser.add_argument("--batch", type=int, default=32)
+    parser.add_argument("--steps", type=int, default=5, help="timed steps per variant and round")
+    parser.add_argument("--rounds", type=int, default=3)
+    args = parser.parse_args()
+    gen = torch.Generator().manual_seed(0)
+    size = args.image_size
+    frames = torch.randint(0, 256, (EPISODES, PUSHES + 1, size, size, 3), dtype=torch.uint8)
+    actions = torch.rand(EPISODES, PUSHES, 4, generator=gen) * 2 - 1
+
+    def fresh_model() -> KINetWorldModel:
+        torch.manual_seed(0)
+        return KINetWorldModel()
+
+    channels_last = fresh_model().to(memory_format=torch.channels_last)
+    variants: dict[str, Step] = {
+        "bare loop": bare_step(fresh_model(), frames, actions),
+        "kinet_rl KINetLoss": kinet_rl_step(KINetLoss(fresh_model()), frames, actions),
+        "kinet_rl + channels_last weights": kinet_rl_step(KINetLoss(channels_last), frames, actions),
+        "bare loop, I_0 without grad": bare_step(fresh_model(), frames, actions, False),
+    }
+    for step in variants.values():  # warm-up
+        samples_per_s(step, 2, args.batch, gen)
+    results: dict[str, list[float]] = {name: [] for name in variants}
+    for _ in range(args.rounds):
+        for name, step in variants.items():
+            results[name].append(samples_per_s(step, args.steps, args.batch, gen))
+    base = statistics.median(results["bare loop"])
+    print(f"threads: {torch.get_num_threads()}, {size} px, batch {args.batch}")
+    print(f"{'variant':36s} {'samples/s':>10s} {'vs bare':>8s}")
+    for name, values in results.items():
+        rate = statistics.median(values)
+        print(f"{name:36s} {rate:10.1f} {rate / base:8.2f}")
+    print(f"ratio: {statistics.median(results['kinet_rl KINetLoss']) / base:.3f}")
+
+
+if __name__ == "__main__":
+    main()
