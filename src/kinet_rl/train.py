@@ -20,6 +20,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from kinet_rl.atomic import atomic_write_json
 from kinet_rl.collect import collect_all
+from kinet_rl.control.evaluation import evaluate_rearrangement
 from kinet_rl.data import load_dataset
 from kinet_rl.evaluation.report import TrainingReport
 from kinet_rl.models import KINetWorldModel
@@ -45,6 +46,17 @@ def run_identity(cfg: DictConfig) -> dict:
         "loss": OmegaConf.to_container(cfg.loss, resolve=True),
         "dataset": str(dataset_path(cfg)),
         "batch_size": cfg.trainer.batch_size,
+    }
+
+
+def short_rearrangement(cfg: DictConfig, model: KINetWorldModel, run_dir: Path) -> dict:
+    """A few rearrangement episodes by GraphMPC against the other methods (kinet_rl.evaluate)."""
+    settings = cast(dict[str, Any], OmegaConf.to_container(cfg, resolve=True))
+    settings["eval"]["episodes"] = cfg.report.rearrangement_episodes
+    summary = evaluate_rearrangement(model.cpu(), settings, run_dir / "rearrangement")["summary"]
+    return {
+        condition: {method: stats["final_distance"] for method, stats in by_method.items()}
+        for condition, by_method in summary.items()
     }
 
 
@@ -84,6 +96,8 @@ def train(cfg: DictConfig, run_dir: Path) -> dict:
     name = "kinet.pt" if isinstance(model, KINetWorldModel) else "model.pt"
     model.save_checkpoint(run_dir / name, config=OmegaConf.to_container(cfg, resolve=True))
     results = {**report.final(trainer.step), "world_size": ctx.world_size}
+    if isinstance(model, KINetWorldModel) and cfg.report.rearrangement_episodes > 0:
+        results["rearrangement"] = short_rearrangement(cfg, model, run_dir)
     atomic_write_json(run_dir / "results.json", results)
     return results
 
@@ -96,6 +110,9 @@ def main(cfg: DictConfig) -> None:
     if results:
         print(f"\nRun directory: {run_dir}")
         print((run_dir / "report.md").read_text())
+        rearrangement = run_dir / "rearrangement" / "rearrangement.md"
+        if "rearrangement" in results and rearrangement.exists():
+            print(rearrangement.read_text())
 
 
 if __name__ == "__main__":

@@ -73,7 +73,7 @@ def test_markdown_lists_methods_and_the_generalization_table() -> None:
     }
     text = markdown(settings, summary, "plot.png")
     assert "| KINet-GraphMPC | 1 | 80.0 | 12.0 ± 0.0 | 100% |" in text
-    assert "| 1 | 12.0 ± 0.0 |" in text and "| 2 | - |" in text
+    assert "| 1 | 12.0 ± 0.0 (80.0) |" in text and "| 2 | - |" in text
     assert "![distance to goal](plot.png)" in text
 
 

@@ -81,13 +81,16 @@ def markdown(settings: RearrangementSettings, summary: Summary, plot_name: str) 
         geometries = [g for g in settings.geometries if any(k.endswith(f"geom_{g}") for k in cells)]
         lines += [
             "",
-            "Generalization (KINet-GraphMPC final distance at T, mm; paper Table II layout):",
+            "Generalization (KINet-GraphMPC distance at T, mm, start in brackets; paper Table II layout):",
             "",
             "| N | " + " | ".join(f"geom_{g}" for g in geometries) + " |",
             "|---|" + "---|" * len(geometries),
         ]
         for n in settings.num_objects:
-            row = [_final(cells.get(f"n{n}_geom_{g}", {}).get("kinet_graph")) for g in geometries]
+            row = [
+                _final(cells.get(f"n{n}_geom_{g}", {}).get("kinet_graph"), with_start=True)
+                for g in geometries
+            ]
             lines.append(f"| {n} | " + " | ".join(row) + " |")
     backgrounds = {k: v for k, v in summary.items() if k.startswith("background_")}
     if backgrounds:
@@ -106,10 +109,11 @@ def markdown(settings: RearrangementSettings, summary: Summary, plot_name: str) 
     return "\n".join(lines) + "\n"
 
 
-def _final(stats: dict[str, Any] | None) -> str:
+def _final(stats: dict[str, Any] | None, with_start: bool = False) -> str:
     if stats is None:
         return "-"
-    return f"{stats['final_distance'] * 1e3:.1f} ± {stats['final_distance_sem'] * 1e3:.1f}"
+    text = f"{stats['final_distance'] * 1e3:.1f} ± {stats['final_distance_sem'] * 1e3:.1f}"
+    return f"{text} ({stats['initial_distance'] * 1e3:.1f})" if with_start else text
 
 
 def video_frames(result: EpisodeResult) -> list[np.ndarray]:
