@@ -1,6 +1,6 @@
 """Training throughput: samples/s of a ``KINetLoss`` step against a bare PyTorch loop.
 
-Usage: ``python bench/train_throughput.py [--image-size 64] [--batch 32] [--steps 5] [--rounds 3]``
+Usage: ``python bench/train_throughput.py [--image-size 64] [--batch 32] [--rounds 20]``
 
 Both loops train the same model (default KINet sizes) on the same in-memory uint8 frames
 ``[E, T+1, H, W, 3]``. kinet_rl's step is the Trainer's: gather a ``PushDataset``-style
@@ -10,8 +10,8 @@ written inline (no TensorDict, no LossModule). CPU speed-up candidates are timed
 run: channels-last weights (did not pay: kept out of the library), and the former transition
 that encoded ``I_0`` with gradient (kinet_rl now encodes ``I_0`` and ``I_t+1`` in one pass
 without gradient, which was faster and learnt as well; see ``KINetWorldModel.transition``).
-The strided first conv and the pixel-shuffle output layer are built into the model. Variants run alternately for several
-rounds after a warm-up; medians are reported. The last line is ``ratio: X`` = kinet_rl
+The strided first conv and the pixel-shuffle output layer are built into the model. After a warm-up the variants take one step
+each in turn for ``--rounds`` rounds; median step times are reported. The last line is ``ratio: X`` = kinet_rl
 samples/s over bare-loop samples/s.
 """
 
@@ -76,7 +76,9 @@ def bare_step(
                 following = det.encode(batch[:, 2])
         else:  # kinet_rl's transition: I_0 and I_t+1 in one pass without gradient
             with torch.no_grad():
-                source, following = det.encode(batch[:, [0, 2]].transpose(0, 1).flatten(0, 1)).split(n)
+                source, following = det.encode(
+                    batch[:, [0, 2]].transpose(0, 1).flatten(0, 1)
+                ).split(n)
             observed = det.encode(batch[:, 1])
         image = rec(source, observed)
         target = pixels_to_input(batch[:, 1]).permute(0, 2, 3, 1)
@@ -93,23 +95,20 @@ def bare_step(
     return step
 
 
-def samples_per_s(step: Step, steps: int, batch: int, gen: torch.Generator) -> float:
-    draws = [
-        (torch.randint(EPISODES, (batch,), generator=gen), torch.randint(PUSHES, (batch,), generator=gen))
-        for _ in range(steps)
-    ]
+def step_seconds(step: Step, batch: int, gen: torch.Generator) -> float:
+    """Wall time of one training step on a random batch."""
+    episode = torch.randint(EPISODES, (batch,), generator=gen)
+    push = torch.randint(PUSHES, (batch,), generator=gen)
     start = time.perf_counter()
-    for episode, push in draws:
-        step(episode, push)
-    return steps * batch / (time.perf_counter() - start)
+    step(episode, push)
+    return time.perf_counter() - start
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--image-size", type=int, default=64)
     parser.add_argument("--batch", type=int, default=32)
-    parser.add_argument("--steps", type=int, default=5, help="timed steps per variant and round")
-    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--rounds", type=int, default=20, help="timed steps per variant")
     args = parser.parse_args()
     gen = torch.Generator().manual_seed(0)
     size = args.image_size
@@ -124,22 +123,28 @@ def main() -> None:
     variants: dict[str, Step] = {
         "bare loop": bare_step(fresh_model(), frames, actions),
         "kinet_rl KINetLoss": kinet_rl_step(KINetLoss(fresh_model()), frames, actions),
-        "kinet_rl + channels_last weights": kinet_rl_step(KINetLoss(channels_last), frames, actions),
+        "kinet_rl + channels_last weights": kinet_rl_step(
+            KINetLoss(channels_last), frames, actions
+        ),
         "bare loop, I_0 with grad (before)": bare_step(fresh_model(), frames, actions, True),
     }
     for step in variants.values():  # warm-up
-        samples_per_s(step, 2, args.batch, gen)
-    results: dict[str, list[float]] = {name: [] for name in variants}
+        for _ in range(2):
+            step_seconds(step, args.batch, gen)
+    # One step of each variant in turn, so that load changes on a shared machine hit all alike.
+    times: dict[str, list[float]] = {name: [] for name in variants}
     for _ in range(args.rounds):
         for name, step in variants.items():
-            results[name].append(samples_per_s(step, args.steps, args.batch, gen))
-    base = statistics.median(results["bare loop"])
-    print(f"threads: {torch.get_num_threads()}, {size} px, batch {args.batch}")
+            times[name].append(step_seconds(step, args.batch, gen))
+    rates = {name: args.batch / statistics.median(values) for name, values in times.items()}
+    base = rates["bare loop"]
+    print(
+        f"threads: {torch.get_num_threads()}, {size} px, batch {args.batch}, {args.rounds} rounds"
+    )
     print(f"{'variant':36s} {'samples/s':>10s} {'vs bare':>8s}")
-    for name, values in results.items():
-        rate = statistics.median(values)
+    for name, rate in rates.items():
         print(f"{name:36s} {rate:10.1f} {rate / base:8.2f}")
-    print(f"ratio: {statistics.median(results['kinet_rl KINetLoss']) / base:.3f}")
+    print(f"ratio: {rates['kinet_rl KINetLoss'] / base:.3f}")
 
 
 if __name__ == "__main__":

@@ -79,7 +79,9 @@ def safe_torch_load(
     """
     path = Path(path)
     if not path.is_file():
-        raise CheckpointError(f"No checkpoint file at {path}; check the path or train a model first.")
+        raise CheckpointError(
+            f"No checkpoint file at {path}; check the path or train a model first."
+        )
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as err:  # torch raises several types for truncated or corrupt files

@@ -26,5 +26,11 @@ KP_FEAT = ("keypoints", "feat")  # float32 [*B, K, D]
 GOAL_KP_POS = ("goal", "keypoints", "pos")
 GOAL_KP_FEAT = ("goal", "keypoints", "feat")
 KP_NODE_EMB = ("keypoints", "node_emb")  # float32 [*B, K, E] scene-graph node embeddings
-GOAL_KP_NODE_EMB = ("goal", "keypoints", "node_emb")  # float32 [*B, K, E] goal-graph node embeddings
+GOAL_KP_NODE_EMB = (
+    "goal",
+    "keypoints",
+    "node_emb",
+)  # float32 [*B, K, E] goal-graph node embeddings
 GOAL_OBJECT_POS = ("goal", "object_pos")  # float32 [*B, N, 2] metres, goal of the oracle planner
+OBJECT_FEAT = ("objects", "feat")  # float32 [*B, N, F] per-object visual features (VisIN)
+GOAL_IMAGE_FEAT = ("goal", "image", "feat")  # float32 [*B, D] goal-image feature (Forw/ForwInv)

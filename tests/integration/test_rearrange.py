@@ -150,8 +150,7 @@ def test_evaluate_entry_point_composes_eval_group(tmp_path: Path) -> None:
     checkpoint = tmp_path / "kinet.pt"
     tiny_model().save_checkpoint(checkpoint)
     overrides = [
-        "+eval=rearrange",
-        f"+checkpoint={checkpoint}",
+        f"checkpoint={checkpoint}",
         "env.image_size=32",
         "eval.episodes=1",
         "eval.num_steps=2",

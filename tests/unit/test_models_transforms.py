@@ -12,7 +12,6 @@ from torchrl.envs.utils import check_env_specs
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from fake_push_env import make_fake_env  # noqa: E402
-
 from kinet_rl.keys import KP_FEAT, KP_POS, PIXELS  # noqa: E402
 from kinet_rl.models import KeypointDetector, KeypointTransform  # noqa: E402
 
@@ -36,12 +35,12 @@ def test_rollout_has_keypoints_of_each_frame():
     env = keypoint_env()
     rollout = env.rollout(3)
     assert rollout[KP_POS].shape == (3, 3, 2) and rollout[KP_FEAT].shape == (3, 3, 4)
-    assert rollout["next", *KP_POS].shape == (3, 3, 2)
+    assert rollout[("next", *KP_POS)].shape == (3, 3, 2)
     assert rollout[KP_POS].abs().max() <= 1
     detector = env.transform[-1].detector
     with torch.no_grad():
         expected, _ = detector(rollout["next", PIXELS])
-    torch.testing.assert_close(rollout["next", *KP_POS], expected)
+    torch.testing.assert_close(rollout[("next", *KP_POS)], expected)
     assert not rollout[KP_POS].requires_grad
 
 

@@ -63,7 +63,7 @@ def test_forward_from_pixels_writes_documented_keys(model):
     for key, shape in expected.items():
         assert out[key].shape == shape and out[key].dtype == torch.float32, key
     assert torch.equal(out[PIXELS], pixels)  # inputs are left alone
-    torch.testing.assert_close(out["next", *KP_FEAT], out[KP_FEAT])  # appearance carried over
+    torch.testing.assert_close(out[("next", *KP_FEAT)], out[KP_FEAT])  # appearance carried over
 
 
 def test_forward_from_keypoints_needs_no_pixels_and_any_k(model):
@@ -73,7 +73,7 @@ def test_forward_from_keypoints_needs_no_pixels_and_any_k(model):
         batch_size=[4],
     )
     out = model(td)
-    assert out["next", *KP_POS].shape == (4, 7, 2)
+    assert out[("next", *KP_POS)].shape == (4, 7, 2)
 
 
 def test_forward_without_inputs_names_the_fix(model):

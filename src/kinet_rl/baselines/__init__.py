@@ -6,7 +6,6 @@ evaluation and ``save_checkpoint``/``from_checkpoint``. See ``docs/baselines.md`
 
 from __future__ import annotations
 
-from kinet_rl.baselines.checkpoint import ConfigCheckpointMixin
 from kinet_rl.baselines.encoders import ConvEncoder, crop_objects
 from kinet_rl.baselines.image_models import (
     IMAGE_FEAT,
@@ -23,6 +22,7 @@ from kinet_rl.baselines.object_models import (
     VisualInteractionModel,
 )
 from kinet_rl.baselines.toy_pushing import ToyPushData
+from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 
 __all__ = [
     "IMAGE_FEAT",

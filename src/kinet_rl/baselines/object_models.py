@@ -25,7 +25,6 @@ import torch
 from tensordict import TensorDictBase
 from torch import Tensor, nn
 
-from kinet_rl.baselines.checkpoint import ConfigCheckpointMixin
 from kinet_rl.baselines.encoders import ConvEncoder, crop_objects
 from kinet_rl.envs.workspace import workspace_for
 from kinet_rl.evaluation.forward import SceneGeometry, model_device
@@ -35,6 +34,7 @@ from kinet_rl.evaluation.projection import (
     camera_projection,
 )
 from kinet_rl.keys import ACTION, OBJECT_POS, PIXELS
+from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.models.interaction import KeypointInteractionNet
 
 

@@ -8,17 +8,19 @@ the same for every method, so methods are compared on identical episodes.
 
 from __future__ import annotations
 
+import importlib
 import logging
 import multiprocessing
 from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
 
 from kinet_rl.control.rearrange import (
+    BASELINE_METHODS,
     METHODS,
     EpisodeResult,
     KINetController,
@@ -32,6 +34,7 @@ from kinet_rl.control.rearrange import (
 from kinet_rl.control.robot import PushPlanner
 from kinet_rl.envs.workspace import workspace_for
 from kinet_rl.models import KINetWorldModel
+from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 
 logger = logging.getLogger(__name__)
 
@@ -99,9 +102,11 @@ class RearrangementSettings:
     videos: int = 1
 
     def __post_init__(self) -> None:
-        unknown = [m for m in self.methods if m not in METHODS]
+        unknown = [m for m in self.methods if m not in METHODS + BASELINE_METHODS]
         if unknown:
-            raise ValueError(f"Unknown methods {unknown}; choose from {list(METHODS)}.")
+            raise ValueError(
+                f"Unknown methods {unknown}; choose from {list(METHODS + BASELINE_METHODS)}."
+            )
         if self.episodes < 1 or self.task.num_steps < 1:
             raise ValueError("episodes and task.num_steps must be at least 1.")
 
@@ -176,12 +181,15 @@ class Job:
     record: bool
 
 
-_WORKER_MODEL: KINetWorldModel | None = None
+_WORKER_MODEL: torch.nn.Module | None = None
 
 
-def _model_payload(model: KINetWorldModel) -> dict[str, Any]:
+def _model_payload(model: torch.nn.Module) -> dict[str, Any]:
+    """What a worker needs to rebuild ``model`` (KINet or a baseline): class, config, weights."""
+    model_class = type(model)
     return {
-        "config": dict(model.config),
+        "class": (model_class.__module__, model_class.__qualname__),
+        "config": dict(cast(ConfigCheckpointMixin, model).config),
         "state_dict": {k: v.cpu() for k, v in model.state_dict().items()},
     }
 
@@ -190,14 +198,15 @@ def _init_worker(payload: dict[str, Any] | None) -> None:
     global _WORKER_MODEL
     torch.set_num_threads(1)
     if payload is not None:
-        _WORKER_MODEL = KINetWorldModel(**payload["config"])
+        module, name = payload["class"]
+        _WORKER_MODEL = getattr(importlib.import_module(module), name)(**payload["config"])
         _WORKER_MODEL.load_state_dict(payload["state_dict"])
         _WORKER_MODEL.eval()
 
 
 def make_controller(
     method: str,
-    model: KINetWorldModel | None,
+    model: torch.nn.Module | None,
     scene: SceneSettings,
     settings: RearrangementSettings,
     seed: int,
@@ -209,8 +218,19 @@ def make_controller(
         return OracleController(
             scene, dict(settings.oracle_planner), settings.oracle_contact_radius, seed
         )
+    if method in BASELINE_METHODS:
+        if model is None:
+            raise ValueError(f"Method {method!r} needs a trained baseline model; pass model=.")
+        from kinet_rl.baselines.model_env import BaselineMPCController
+
+        return BaselineMPCController(model, settings.planner, seed)
     if model is None:
         raise ValueError(f"Method {method!r} needs a trained KINet model; pass model=.")
+    if not isinstance(model, KINetWorldModel):
+        raise TypeError(
+            f"Method {method!r} plans with KINet, got a {type(model).__name__}; use method "
+            "'model_mpc' for baseline models."
+        )
     half_size = workspace_for(scene.task).half_size
     planner = PushPlanner(
         model, half_size, reward=KINET_REWARDS[method], seed=seed, **dict(settings.planner)
@@ -219,7 +239,7 @@ def make_controller(
 
 
 def _run_job(
-    job: Job, settings: RearrangementSettings, model: KINetWorldModel | None
+    job: Job, settings: RearrangementSettings, model: torch.nn.Module | None
 ) -> EpisodeResult:
     episode = make_episode(job.scene, settings.task, job.seed)
     try:
@@ -252,7 +272,7 @@ def make_jobs(settings: RearrangementSettings, conditions: Iterable[Condition]) 
 def run_jobs(
     jobs: list[Job],
     settings: RearrangementSettings,
-    model: KINetWorldModel | None,
+    model: torch.nn.Module | None,
     progress: bool = False,
 ) -> dict[str, dict[str, list[EpisodeResult]]]:
     """Runs ``jobs`` (in parallel with ``settings.workers`` > 1); results by condition and method."""
@@ -299,7 +319,7 @@ def summarize(episodes: list[EpisodeResult]) -> dict[str, Any]:
 
 
 def evaluate_rearrangement(
-    model: KINetWorldModel | None,
+    model: torch.nn.Module | None,
     settings: RearrangementSettings | Mapping[str, Any],
     out_dir: str | Path,
     generalization: bool = False,
@@ -308,7 +328,8 @@ def evaluate_rearrangement(
     """Runs the rearrangement evaluation and writes ``rearrangement.png``, ``.md`` and ``.json``.
 
     Args:
-        model: Trained KINet (None: only the ``random`` and ``oracle`` methods can run).
+        model: Trained KINet, or a baseline for method ``model_mpc`` (None: only the
+            ``random`` and ``oracle`` methods can run).
         settings: :class:`RearrangementSettings`, or a dict with ``eval`` and ``env`` entries
             (plain containers, e.g. ``OmegaConf.to_container(cfg)``).
         out_dir: Folder of the outputs (created).
@@ -327,9 +348,11 @@ def evaluate_rearrangement(
         )
     conditions = settings.conditions(generalization)
     if model is None:
-        needs = sorted({m for c in conditions for m in c.methods if m in KINET_REWARDS})
+        needs = sorted(
+            {m for c in conditions for m in c.methods if m in (*KINET_REWARDS, *BASELINE_METHODS)}
+        )
         if needs:
-            raise ValueError(f"Methods {needs} need a KINet model; pass model= or drop them.")
+            raise ValueError(f"Methods {needs} need a model; pass model= or drop them.")
     results = run_jobs(make_jobs(settings, conditions), settings, model, progress=progress)
     summary = {
         cond: {method: summarize(eps) for method, eps in by_method.items()}

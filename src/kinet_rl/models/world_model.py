@@ -6,7 +6,6 @@ Reference: KINet, Rezazadeh et al., RA-L 2023, Sec. 3.
 from __future__ import annotations
 
 import logging
-import os
 from dataclasses import dataclass
 from typing import Any
 
@@ -14,9 +13,9 @@ import torch
 from tensordict import TensorDictBase
 from torch import Tensor, nn
 
-from kinet_rl.atomic import CheckpointError, atomic_torch_save, safe_torch_load
 from kinet_rl.evaluation.forward import KeypointObjectRollout, SceneGeometry
 from kinet_rl.keys import ACTION, KP_FEAT, KP_NODE_EMB, KP_POS, PIXELS, PIXELS_0
+from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.models.interaction import GraphPrediction, KeypointInteractionNet
 from kinet_rl.models.keypoints import KeypointDetector, KeypointReconstructor, pixels_to_input
 
@@ -46,7 +45,7 @@ class TransitionOutputs:
     prediction: GraphPrediction
 
 
-class KINetWorldModel(nn.Module):
+class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
     """Keypoint detector ``f_kp``, reconstructor ``f_rec`` and interaction net ``f_fwd``.
 
     Keypoints and features fed to the interaction net are detached, so forward-model losses never
@@ -70,6 +69,8 @@ class KINetWorldModel(nn.Module):
         num_rounds: ``L`` message-passing rounds.
         deterministic: Ablation: fully connected graph and no KL.
     """
+
+    checkpoint_format = CHECKPOINT_FORMAT
 
     def __init__(
         self,
@@ -145,7 +146,7 @@ class KINetWorldModel(nn.Module):
         batch = first.shape[0]
         # I_0 and I_t+1 in one pass without gradient: I_t+1 is only a forward-model target
         # (detached anyway, paper Sec. 3.5); dropping the gradient through I_0's features made
-        # training 18% faster and learnt as well (bench/train_throughput.py and
+        # a training step ~1.2x faster and learnt as well (bench/train_throughput.py and
         # tests/integration/test_models_learning.py, 3 seeds). The detector learns from I_t.
         with torch.no_grad():
             source, following_enc = self.detector.encode(torch.cat([first, following])).split(batch)
@@ -173,62 +174,3 @@ class KINetWorldModel(nn.Module):
     def object_rollout(self, geometry: SceneGeometry) -> KeypointObjectRollout:
         """Object positions read off predicted keypoints, for forward-prediction evaluation."""
         return KeypointObjectRollout(self, geometry)
-
-    def save_checkpoint(
-        self, path: str | os.PathLike, config: dict[str, Any] | None = None
-    ) -> None:
-        """Atomically writes weights, the constructor config and optional run ``config`` metadata."""
-        state = {
-            "format": CHECKPOINT_FORMAT,
-            "model_config": dict(self.config),
-            "config": dict(config or {}),
-            "state_dict": self.state_dict(),
-        }
-        atomic_torch_save(state, path)
-        log.info("Saved KINet checkpoint to %s", path)
-
-    @classmethod
-    def from_checkpoint(
-        cls, path: str | os.PathLike, expected_config: dict[str, Any] | None = None
-    ) -> KINetWorldModel:
-        """Rebuilds a model saved by :meth:`save_checkpoint` (loaded with ``weights_only=True``).
-
-        Args:
-            path: Checkpoint file.
-            expected_config: Constructor settings the caller relies on; any that differ from the
-                stored ones raise :class:`CheckpointError`.
-
-        Raises:
-            CheckpointError: Missing, corrupt, truncated, foreign or mismatching checkpoint.
-        """
-        state = safe_torch_load(
-            path, ("format", "model_config", "state_dict"), "KINetWorldModel.save_checkpoint"
-        )
-        if state["format"] != CHECKPOINT_FORMAT:
-            raise CheckpointError(
-                f"Checkpoint {path} has format {state['format']!r}, expected {CHECKPOINT_FORMAT!r}; "
-                "re-save it with this kinet_rl version."
-            )
-        stored = state["model_config"]
-        diffs = {
-            key: (value, stored.get(key, "<missing>"))
-            for key, value in (expected_config or {}).items()
-            if stored.get(key, "<missing>") != value
-        }
-        if diffs:
-            detail = ", ".join(
-                f"{k}: expected {e!r}, checkpoint {s!r}" for k, (e, s) in diffs.items()
-            )
-            raise CheckpointError(
-                f"Checkpoint {path} does not match the requested model config ({detail}); "
-                "use a checkpoint trained with these settings or change the config to match."
-            )
-        try:
-            model = cls(**stored)
-            model.load_state_dict(state["state_dict"])
-        except (TypeError, RuntimeError) as err:
-            raise CheckpointError(
-                f"Checkpoint {path} holds weights that do not fit its model config ({err}); "
-                "the file was edited or written by an incompatible version, re-save it."
-            ) from err
-        return model

@@ -1,0 +1,230 @@
+"""Train and evaluate every row of the comparison tables: ``python -m kinet_rl.tables [tables=paper]``.
+
+For each model (KINet, its ablations and the baselines) and camera, the row's config is the root
+config composed with the experiment ``+exp=blocks_<camera>view<suffix>`` and the scale's
+overrides (``conf/tables/<scale>.yaml``); the row is trained with :func:`kinet_rl.train.train`
+in ``<out>/<exp_name>`` and then evaluated the same way as every other row:
+
+* Table I: single-step forward error on held-out test sequences (same sequences per camera).
+* MPC table (``mpc_camera`` only): :func:`~kinet_rl.control.evaluation.evaluate_rearrangement`
+  with ``kinet_graph`` (KINet variants) or ``model_mpc`` (baselines), on the same episodes, plus
+  random pushes and the oracle.
+* Table II: the generalization cells (1-5 objects x train/gen geometry) of ``generalization_models``.
+
+Every stage writes its JSON next to the row's run; re-running skips finished stages (a row's
+training is finished when its ``results.json`` exists). Writes ``<out>/tables.md`` and
+``<out>/mpc_curves.png``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, cast
+
+import hydra
+from hydra import compose
+from hydra.core.hydra_config import HydraConfig
+from hydra.utils import get_class
+from omegaconf import DictConfig, OmegaConf
+
+from kinet_rl.atomic import atomic_write_json, atomic_write_text
+from kinet_rl.control.evaluation import RearrangementSettings, evaluate_rearrangement
+from kinet_rl.data import load_dataset
+from kinet_rl.evaluation.report import scene_geometry
+from kinet_rl.evaluation.tables_report import (
+    mpc_table,
+    plot_mpc_curves,
+    single_step_errors,
+    table_i,
+    table_ii,
+)
+from kinet_rl.models import KINetWorldModel
+from kinet_rl.models.checkpointing import ConfigCheckpointMixin
+from kinet_rl.train import dataset_path, train
+
+logger = logging.getLogger(__name__)
+
+CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
+
+#: Experiment-name suffix of each row model (``conf/exp/blocks_<camera>view<suffix>.yaml``).
+EXPERIMENT_SUFFIX = {
+    "kinet": "",
+    "kinet_determ": "_determ",
+    "kinet_no_ctr": "_no_ctr",
+    "forw": "_forw",
+    "forwinv": "_forwinv",
+    "in": "_in",
+    "visin": "_visin",
+}
+CAMERAS = ("top", "side")
+
+
+def experiment_name(model: str, camera: str) -> str:
+    """The experiment of a table row, e.g. ``blocks_topview_determ``."""
+    if model not in EXPERIMENT_SUFFIX or camera not in CAMERAS:
+        raise ValueError(
+            f"Unknown row ({model!r}, {camera!r}); models: {sorted(EXPERIMENT_SUFFIX)}, cameras: "
+            f"{list(CAMERAS)}. Fix conf/tables/<scale>.yaml."
+        )
+    return f"blocks_{camera}view{EXPERIMENT_SUFFIX[model]}"
+
+
+def row_config(tables: DictConfig, model: str, camera: str) -> DictConfig:
+    """The composed training config of a row (needs an initialised Hydra, e.g. inside ``main``)."""
+    exp = experiment_name(model, camera)
+    extra = [o.replace("{camera}", camera) for o in tables.overrides]
+    extra += list(tables.model_overrides.get(model, []))
+    cfg = compose(config_name="config", overrides=[f"+exp={exp}", *extra])
+    if cfg.exp_name != exp:
+        raise ValueError(
+            f"Experiment {exp} sets exp_name={cfg.exp_name}; the tables need them equal."
+        )
+    return cfg
+
+
+def load_model(cfg: DictConfig, run_dir: Path) -> Any:
+    """The trained model of a row: ``kinet.pt`` (KINet) or ``model.pt`` (baselines)."""
+    model_class = cast(type[ConfigCheckpointMixin], get_class(cfg.model._target_))
+    name = "kinet.pt" if issubclass(model_class, KINetWorldModel) else "model.pt"
+    model: Any = model_class.from_checkpoint(run_dir / name)
+    return model.cpu().eval()
+
+
+def _cached(path: Path, compute) -> Any:
+    if path.is_file():
+        return json.loads(path.read_text())
+    value = compute()
+    atomic_write_json(path, value)
+    return value
+
+
+def rearrangement_settings(
+    cfg: DictConfig, eval_overrides: Mapping[str, Any], methods: list[str]
+) -> RearrangementSettings:
+    """The row's eval group with the table scale's overrides and the given methods."""
+    container = cast(dict[str, Any], OmegaConf.to_container(cfg, resolve=True))
+    eval_cfg = {**container["eval"], **eval_overrides, "methods": methods}
+    return RearrangementSettings.from_dicts(eval_cfg, container["env"])
+
+
+def run_row(tables: DictConfig, model: str, camera: str, out_dir: Path) -> dict[str, Any]:
+    """Trains (unless finished) and evaluates one row; returns its table entries."""
+    cfg = row_config(tables, model, camera)
+    run_dir = out_dir / cfg.exp_name
+    if not (run_dir / "results.json").is_file():
+        start = time.monotonic()
+        logger.info("Training %s in %s", cfg.exp_name, run_dir)
+        train(cfg, run_dir)
+        logger.info("Trained %s in %.0f s", cfg.exp_name, time.monotonic() - start)
+    net = load_model(cfg, run_dir)
+    eval_overrides = cast(dict[str, Any], OmegaConf.to_container(tables.eval, resolve=True))
+
+    def forward() -> dict[str, Any]:
+        expect = {k: cfg.env[k] for k in ("task", "camera", "image_size", "num_objects")}
+        test = load_dataset(dataset_path(cfg), "test", expect)
+        rollout = net.object_rollout(scene_geometry(cfg.env))
+        return single_step_errors(rollout, test, tables.forward_sequences, seed=cfg.seed)
+
+    row: dict[str, Any] = {"forward": _cached(run_dir / "tables_forward.json", forward)}
+    if camera == tables.mpc_camera:
+        method = "kinet_graph" if isinstance(net, KINetWorldModel) else "model_mpc"
+        generalization = model in tables.generalization_models
+
+        def mpc() -> dict[str, Any]:
+            settings = rearrangement_settings(cfg, eval_overrides, [method])
+            start = time.monotonic()
+            summary = evaluate_rearrangement(
+                net, settings, run_dir / "tables_mpc", generalization, progress=True
+            )["summary"]
+            logger.info("MPC evaluation of %s took %.0f s", cfg.exp_name, time.monotonic() - start)
+            return {cond: by_method[method] for cond, by_method in summary.items()}
+
+        row["mpc"] = _cached(run_dir / "tables_mpc.json", mpc)
+    return row
+
+
+def references(tables: DictConfig, out_dir: Path) -> tuple[dict[str, Any], RearrangementSettings]:
+    """Random pushes and the oracle on the MPC table's episodes (no model), and the settings."""
+    cfg = row_config(tables, tables.models[0], tables.mpc_camera)
+    eval_overrides = cast(dict[str, Any], OmegaConf.to_container(tables.eval, resolve=True))
+    settings = rearrangement_settings(cfg, eval_overrides, ["random", "oracle"])
+
+    def compute() -> dict[str, Any]:
+        summary = evaluate_rearrangement(None, settings, out_dir / "references", progress=True)
+        return summary["summary"]["comparison"]
+
+    return _cached(out_dir / "references.json", compute), settings
+
+
+def build_tables(tables: DictConfig, out_dir: Path) -> Path:
+    """Runs every row (resuming), then writes ``tables.md`` and ``mpc_curves.png``; returns the markdown path."""
+    forward: dict[str, dict[str, Any]] = {}
+    mpc: dict[str, Any] = {}
+    cells: dict[str, dict[str, Any]] = {}
+    rows = [(m, c) for c in tables.cameras for m in tables.models]
+    for i, (model, camera) in enumerate(rows, start=1):
+        logger.info("Row %d/%d: %s, %s view", i, len(rows), model, camera)
+        row = run_row(tables, model, camera, out_dir)
+        forward.setdefault(model, {})[camera] = row["forward"]
+        if "mpc" in row:
+            mpc[model] = row["mpc"]["comparison"]
+            cells[model] = {k: v for k, v in row["mpc"].items() if k != "comparison"}
+    reference_stats, settings = references(tables, out_dir)
+    mpc.update(reference_stats)
+    plot = plot_mpc_curves(mpc, out_dir / "mpc_curves.png")
+    text = "\n".join(
+        [
+            f"# KINet comparison tables ({tables.scale} scale)",
+            "",
+            f"Command: `python -m kinet_rl.tables tables={tables.scale}`; row configs: "
+            "`+exp=blocks_<camera>view<suffix>` with the overrides of "
+            f"`conf/tables/{tables.scale}.yaml`; seeds: training seed 0, test sequences seed 0, "
+            "rearrangement episodes seed 10000 + i (the same episodes for every row).",
+            "",
+            "## Table I: single-step forward error (BlockObjs, 3 objects)",
+            "",
+            "Mean object-position error on the table after one push, mm, mean ± std over "
+            f"{tables.forward_sequences} held-out test sequences (start frame only, logged push).",
+            "",
+            table_i(forward, list(tables.models), list(tables.cameras)),
+            "",
+            f"## MPC: distance to goal after T pushes ({tables.mpc_camera} camera)",
+            "",
+            "Ground-truth mean object distance to its goal position, mm, mean ± standard error over "
+            "episodes; success: every object within the success threshold at T.",
+            "",
+            mpc_table(mpc, [*tables.models, "random", "oracle"], settings.task.num_steps),
+            "",
+            f"![distance to goal]({plot.name})",
+            "",
+            "## Table II: generalization (MPC final distance, mm, mean ± s.e.)",
+            "",
+            table_ii(
+                cells,
+                list(tables.generalization_models),
+                settings.num_objects,
+                settings.geometries,
+            ),
+            "",
+        ]
+    )
+    path = out_dir / "tables.md"
+    atomic_write_text(path, text)
+    logger.info("Tables written to %s", path)
+    return path
+
+
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="tables")
+def main(cfg: DictConfig) -> None:
+    """Entry point."""
+    out_dir = Path(HydraConfig.get().runtime.output_dir)
+    path = build_tables(cfg.tables, out_dir)
+    print(path.read_text())
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,155 @@
+"""Baseline model envs and the baseline MPC controller (no simulation; tiny models)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import torch
+from torchrl.envs.utils import check_env_specs
+
+from kinet_rl.baselines import (
+    IMAGE_FEAT,
+    ImageForwardInverseModel,
+    ImageForwardModel,
+    ObjectInteractionModel,
+    VisualInteractionModel,
+)
+from kinet_rl.baselines.model_env import (
+    BaselineMPCController,
+    FeatureModelEnv,
+    ObjectModelEnv,
+    make_baseline_env,
+)
+from kinet_rl.control.evaluation import (
+    RearrangementSettings,
+    evaluate_rearrangement,
+    make_controller,
+)
+from kinet_rl.control.rearrange import SceneSettings
+from kinet_rl.keys import GOAL_IMAGE_FEAT, GOAL_OBJECT_POS, OBJECT_FEAT, OBJECT_POS
+from kinet_rl.planners import GraphMPCPlanner
+
+SIZE, N = 32, 3
+PLANNER = {"planning_horizon": 2, "optim_steps": 2, "num_candidates": 16, "top_k": 4}
+
+
+def tiny(name: str) -> torch.nn.Module:
+    torch.manual_seed(0)
+    small = {"hidden_dim": 16, "num_hidden": 1}
+    if name == "forw":
+        return ImageForwardModel(feature_dim=8, channels=4, probe_hidden_dim=8, **small)
+    if name == "forwinv":
+        return ImageForwardInverseModel(feature_dim=8, channels=4, probe_hidden_dim=8, **small)
+    if name == "in":
+        return ObjectInteractionModel(num_objects=N, embed_dim=8, num_rounds=1, **small)
+    return VisualInteractionModel(
+        num_objects=N, image_size=SIZE, crop_size=8.0, crop_resolution=8, feat_dim=4,
+        channels=4, embed_dim=8, num_rounds=1, **small,
+    )  # fmt: skip
+
+
+def observation(seed: int) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    return {
+        "pixels": rng.integers(0, 255, (SIZE, SIZE, 3), dtype=np.uint8),
+        "object_pos": rng.uniform(-0.15, 0.15, (N, 2)).astype(np.float32),
+    }
+
+
+def start_state(env, seed: int = 0):
+    obs, goal = observation(seed), observation(seed + 1)
+    pixels = torch.from_numpy(obs["pixels"])
+    if isinstance(env, ObjectModelEnv):
+        return env.observe(
+            pixels, torch.from_numpy(obs["object_pos"]), torch.from_numpy(goal["object_pos"])
+        )
+    return env.observe(pixels, torch.from_numpy(goal["pixels"]))
+
+
+@pytest.mark.parametrize("name", ["forw", "forwinv", "in", "visin"])
+def test_model_env_specs_and_state_keys(name: str) -> None:
+    env = make_baseline_env(tiny(name))
+    state = start_state(env)
+    keys = (
+        [OBJECT_POS, OBJECT_FEAT, GOAL_OBJECT_POS]
+        if isinstance(env, ObjectModelEnv)
+        else [IMAGE_FEAT, GOAL_IMAGE_FEAT]
+    )
+    assert set(keys) == set(env.state_spec.keys(True, True))
+    assert env.state_spec.is_in(state)
+    assert not env.batch_locked
+    check_env_specs(env, tensordict=env.reset(state))
+
+
+def test_object_env_reward_is_minus_mean_goal_distance_of_the_prediction() -> None:
+    model = tiny("in")
+    env = ObjectModelEnv(model)
+    state = start_state(env).expand(5).clone()
+    state["action"] = torch.rand(5, 4) * 2 - 1
+    out = env.step(state)
+    pred = model.predict(state[OBJECT_POS], state[OBJECT_FEAT], state["action"])
+    expected = -(pred - state[GOAL_OBJECT_POS]).norm(dim=-1).mean(-1, keepdim=True)
+    torch.testing.assert_close(out["next", "reward"], expected)
+    torch.testing.assert_close(out["next", OBJECT_POS], pred)
+
+
+def test_feature_env_reward_is_minus_squared_feature_distance() -> None:
+    model = tiny("forw")
+    env = FeatureModelEnv(model)
+    state = start_state(env).expand(5).clone()
+    state["action"] = torch.rand(5, 4) * 2 - 1
+    out = env.step(state)
+    pred = model.predict(state[IMAGE_FEAT], state["action"])
+    expected = -(pred - state[GOAL_IMAGE_FEAT]).pow(2).sum(-1, keepdim=True)
+    torch.testing.assert_close(out["next", "reward"], expected)
+
+
+def test_visin_state_carries_crop_features_of_the_current_image() -> None:
+    env = ObjectModelEnv(tiny("visin"))
+    a, b = start_state(env, 0), start_state(env, 5)
+    assert a[OBJECT_FEAT].shape == (N, 4)
+    assert not torch.allclose(a[OBJECT_FEAT], b[OBJECT_FEAT])
+
+
+def test_in_env_planning_improves_the_goal_reward_over_random_actions() -> None:
+    """CEM finds pushes whose predicted reward beats the mean of random pushes."""
+    env = ObjectModelEnv(tiny("in"))
+    state = start_state(env)
+    planner = GraphMPCPlanner(env, generator=torch.Generator().manual_seed(0), **PLANNER)
+    planned = planner(state.clone())["action"]
+    random_actions = torch.rand(64, 4, generator=torch.Generator().manual_seed(1)) * 2 - 1
+    batch = state.expand(64).clone()
+    batch["action"] = random_actions
+    random_reward = env.step(batch)["next", "reward"].mean()
+    single = state.clone()
+    single["action"] = planned
+    assert env.step(single)["next", "reward"].item() > random_reward.item()
+
+
+@pytest.mark.parametrize("name", ["forw", "forwinv", "in", "visin"])
+def test_controller_acts_in_bounds_through_make_controller(name: str) -> None:
+    settings = RearrangementSettings(methods=("model_mpc",), planner=PLANNER)
+    controller = make_controller(
+        "model_mpc", tiny(name), SceneSettings(image_size=SIZE), settings, 0
+    )
+    assert isinstance(controller, BaselineMPCController)
+    goal = observation(1)
+    controller.reset(SimpleNamespace(goal_pos=goal["object_pos"], goal_pixels=goal["pixels"]))
+    action = controller.act(observation(0))
+    assert action.shape == (4,) and np.isfinite(action).all()
+    assert np.abs(action).max() <= 1.0
+
+
+def test_wrong_model_kinds_are_refused_with_a_clear_error() -> None:
+    settings = RearrangementSettings(methods=("model_mpc",), planner=PLANNER)
+    with pytest.raises(TypeError, match="model_mpc"):
+        make_controller("kinet_graph", tiny("in"), SceneSettings(), settings, 0)
+    with pytest.raises(TypeError, match="kinet_graph"):
+        make_baseline_env(torch.nn.Linear(2, 2))
+    with pytest.raises(ValueError, match="need a model"):
+        evaluate_rearrangement(None, settings, "unused")
+    controller = BaselineMPCController(tiny("in"), PLANNER, 0)
+    with pytest.raises(RuntimeError, match="reset"):
+        controller.act(observation(0))
