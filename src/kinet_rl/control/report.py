@@ -21,6 +21,7 @@ LABELS = {
     "kinet_keypoints": "MPC on keypoint positions",
     "random": "Random pushes",
     "oracle": "Oracle MPC (GT state, analytic push model)",
+    "model_mpc": "Baseline model MPC (distance to goal)",
 }
 VIDEO_SCALE = 4
 
