@@ -14,6 +14,7 @@ from torchrl.objectives import LossModule
 from kinet_rl.baselines.image_models import ImageForwardInverseModel, ImageForwardModel
 from kinet_rl.baselines.object_models import ObjectInteractionModel
 from kinet_rl.keys import ACTION, OBJECT_POS, PIXELS
+from kinet_rl.models.losses import check_loss_weights
 
 
 def _require(tensordict: TensorDictBase, keys: list, what: str) -> list[Tensor]:
@@ -22,12 +23,6 @@ def _require(tensordict: TensorDictBase, keys: list, what: str) -> list[Tensor]:
     if missing:
         raise KeyError(f"A {what} training batch needs {keys}; missing: {missing}.")
     return [tensordict.get(key) for key in keys]
-
-
-def _check_weights(**weights: float) -> None:
-    for name, value in weights.items():
-        if value < 0:
-            raise ValueError(f"{name} must be >= 0, got {value}.")
 
 
 def feature_info_nce(predicted: Tensor, target: Tensor, temperature: float = 1.0) -> Tensor:
@@ -75,14 +70,13 @@ class ImageForwardLoss(LossModule):
         ctr_temperature: float = 1.0,
     ) -> None:
         super().__init__()
-        _check_weights(
+        check_loss_weights(
+            ctr_temperature,
             fwd_weight=fwd_weight,
             ctr_weight=ctr_weight,
             inv_weight=inv_weight,
             probe_weight=probe_weight,
         )
-        if ctr_temperature <= 0:
-            raise ValueError(f"ctr_temperature must be > 0, got {ctr_temperature}.")
         if inv_weight > 0 and not isinstance(world_model, ImageForwardInverseModel):
             raise ValueError(
                 f"inv_weight={inv_weight} needs an inverse model, but the model is a "
@@ -138,7 +132,7 @@ class ObjectForwardLoss(LossModule):
 
     def __init__(self, world_model: ObjectInteractionModel, fwd_weight: float = 1.0) -> None:
         super().__init__()
-        _check_weights(fwd_weight=fwd_weight)
+        check_loss_weights(fwd_weight=fwd_weight)
         self.world_model = world_model
         self.fwd_weight = fwd_weight
 

@@ -15,6 +15,15 @@ from kinet_rl.models.interaction import graph_similarity
 from kinet_rl.models.world_model import KINetWorldModel
 
 
+def check_loss_weights(ctr_temperature: float = 1.0, **weights: float) -> None:
+    """Raise a ValueError naming a negative loss weight or a non-positive contrastive temperature."""
+    for name, value in weights.items():
+        if value < 0:
+            raise ValueError(f"{name} must be >= 0, got {value}.")
+    if ctr_temperature <= 0:
+        raise ValueError(f"ctr_temperature must be > 0, got {ctr_temperature}.")
+
+
 def graph_info_nce(predicted: Tensor, target: Tensor, temperature: float = 1.0) -> Tensor:
     """InfoNCE over a batch of graphs with ``S(G1, G2) / temperature`` as logits.
 
@@ -67,16 +76,13 @@ class KINetLoss(LossModule):
         ctr_temperature: float = 1.0,
     ) -> None:
         super().__init__()
-        for name, value in [
-            ("rec_weight", rec_weight),
-            ("fwd_weight", fwd_weight),
-            ("kl_weight", kl_weight),
-            ("ctr_weight", ctr_weight),
-        ]:
-            if value < 0:
-                raise ValueError(f"{name} must be >= 0, got {value}.")
-        if ctr_temperature <= 0:
-            raise ValueError(f"ctr_temperature must be > 0, got {ctr_temperature}.")
+        check_loss_weights(
+            ctr_temperature,
+            rec_weight=rec_weight,
+            fwd_weight=fwd_weight,
+            kl_weight=kl_weight,
+            ctr_weight=ctr_weight,
+        )
         self.world_model = world_model
         self.rec_weight = rec_weight
         self.fwd_weight = fwd_weight
