@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+from kinet_rl.control.model_env import REWARDS
 from kinet_rl.control.robot import PushPlanner
 from kinet_rl.envs.workspace import WORKSPACES
 from kinet_rl.models import KINetWorldModel
@@ -55,7 +56,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         default=None,
         help="resize images to this square size (default: the checkpoint's env)",
     )
-    parser.add_argument("--reward", choices=("graph", "keypoints"), default="graph")
+    parser.add_argument(
+        "--reward",
+        choices=REWARDS,
+        default="graph_distance",
+        help="planning objective (docs/planning.md); graph = the paper's S",
+    )
     parser.add_argument("--horizon", type=int, default=1)
     parser.add_argument("--candidates", type=int, default=256)
     parser.add_argument("--iterations", type=int, default=5)

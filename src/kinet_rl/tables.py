@@ -131,7 +131,7 @@ def run_row(tables: DictConfig, model: str, camera: str, out_dir: Path) -> dict[
 
     row: dict[str, Any] = {"forward": _cached(run_dir / "tables_forward.json", forward)}
     if camera == tables.mpc_camera:
-        method = "kinet_graph" if isinstance(net, KINetWorldModel) else "model_mpc"
+        method = tables.eval.kinet_method if isinstance(net, KINetWorldModel) else "model_mpc"
         generalization = model in tables.generalization_models
 
         def mpc() -> dict[str, Any]:
@@ -197,7 +197,12 @@ def build_tables(tables: DictConfig, out_dir: Path) -> Path:
             "Ground-truth mean object distance to its goal position, mm, mean ± standard error over "
             "episodes; success: every object within the success threshold at T.",
             "",
-            mpc_table(mpc, [*tables.models, "random", "oracle"], settings.task.num_steps),
+            mpc_table(
+                mpc,
+                [*tables.models, "random", "oracle"],
+                settings.task.num_steps,
+                settings.kinet_method,
+            ),
             "",
             f"![distance to goal]({plot.name})",
             "",

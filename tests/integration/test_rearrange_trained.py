@@ -34,7 +34,7 @@ def test_trained_kinet_plans_closer_to_the_goal_than_random_pushes(tmp_path: Pat
         "env": SCENE,
         "eval": {
             "episodes": 3,
-            "methods": ["kinet_graph", "kinet_keypoints", "random"],
+            "methods": ["kinet_graph", "kinet_graph_distance", "kinet_keypoints", "random"],
             "num_steps": 10,
             "workers": 2,
             "videos": 0,
@@ -43,5 +43,5 @@ def test_trained_kinet_plans_closer_to_the_goal_than_random_pushes(tmp_path: Pat
     }
     summary = evaluate_rearrangement(model, settings, tmp_path / "eval")["summary"]["comparison"]
     random_final = summary["random"]["final_distance"]
-    for method in ("kinet_graph", "kinet_keypoints"):
+    for method in ("kinet_graph", "kinet_graph_distance", "kinet_keypoints"):
         assert summary[method]["final_distance"] < random_final, (method, summary)

@@ -9,7 +9,7 @@ import pytest
 from omegaconf import OmegaConf
 
 from kinet_rl.control.evaluation import RearrangementSettings, make_jobs, summarize
-from kinet_rl.control.rearrange import EpisodeResult, all_within, mean_goal_distance
+from kinet_rl.control.rearrange import METHODS, EpisodeResult, all_within, mean_goal_distance
 from kinet_rl.control.report import VIDEO_SCALE, markdown, video_frames
 
 CONF = Path(__file__).resolve().parents[2] / "conf"
@@ -26,7 +26,7 @@ def test_yaml_settings_build_the_comparison_and_table_ii_conditions() -> None:
     assert settings.task.num_steps == 40 and settings.scene.num_objects == 3
     conditions = settings.conditions()
     assert conditions[0].name == "comparison"
-    assert set(conditions[0].methods) == {"kinet_graph", "kinet_keypoints", "random", "oracle"}
+    assert set(conditions[0].methods) == set(METHODS)
     names = {c.name for c in conditions}
     assert {f"n{n}_geom_{g}" for n in range(1, 6) for g in ("train", "gen")} <= names
     assert "background_random" in names
@@ -36,10 +36,12 @@ def test_yaml_settings_build_the_comparison_and_table_ii_conditions() -> None:
 def test_jobs_share_seeds_across_methods_and_record_videos() -> None:
     settings = yaml_settings(episodes=3, videos=1)
     jobs = make_jobs(settings, settings.conditions(generalization=False))
-    assert len(jobs) == 12
+    assert len(jobs) == 3 * len(settings.methods)
     seeds = {m: [j.seed for j in jobs if j.method == m] for m in settings.methods}
     assert all(s == seeds["random"] for s in seeds.values())
-    assert [(j.method, j.seed) for j in jobs if j.record] == [("kinet_graph", settings.seed)]
+    assert [(j.method, j.seed) for j in jobs if j.record] == [
+        (settings.kinet_method, settings.seed)
+    ]
 
 
 def test_bad_settings_are_reported() -> None:
@@ -47,6 +49,8 @@ def test_bad_settings_are_reported() -> None:
         yaml_settings(episodez=3)
     with pytest.raises(ValueError, match="Unknown methods"):
         yaml_settings(methods=["kinet_graph", "teleport"])
+    with pytest.raises(ValueError, match="kinet_method"):
+        yaml_settings(kinet_method="kinet_keypoints")
 
 
 def test_distance_success_and_summary() -> None:
@@ -69,10 +73,10 @@ def test_markdown_lists_methods_and_the_generalization_table() -> None:
     stats = summarize([EpisodeResult("x", 0, np.array([0.08, 0.012]), True, False)])
     summary = {
         "comparison": {"kinet_graph": stats, "random": stats},
-        "n1_geom_train": {"kinet_graph": stats},
+        "n1_geom_train": {settings.kinet_method: stats},
     }
     text = markdown(settings, summary, "plot.png")
-    assert "| KINet-GraphMPC | 1 | 80.0 | 12.0 ± 0.0 | 100% |" in text
+    assert "| KINet-GraphMPC (paper S) | 1 | 80.0 | 12.0 ± 0.0 | 100% |" in text
     assert "| 1 | 12.0 ± 0.0 (80.0) |" in text and "| 2 | - |" in text
     assert "![distance to goal](plot.png)" in text
 

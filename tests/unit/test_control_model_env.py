@@ -60,7 +60,7 @@ def test_env_specs_pass_from_a_state() -> None:
     check_env_specs(env, tensordict=env.reset(env.observe(images((), 0), images((), 1))))
 
 
-@pytest.mark.parametrize("reward", ["graph", "keypoints"])
+@pytest.mark.parametrize("reward", ["graph", "graph_distance", "keypoints"])
 def test_step_reward_matches_the_definition(reward: str) -> None:
     model = tiny_model()
     env = KINetModelEnv(model, reward=reward)
@@ -69,8 +69,11 @@ def test_step_reward_matches_the_definition(reward: str) -> None:
     out = env.step(state.clone().set(ACTION, action))["next"]
     with torch.no_grad():
         pred = model.interaction(state[KP_POS], state[KP_FEAT], action)
+        pred_nodes = model.interaction.embed_nodes(pred.next_pos, state[KP_FEAT])
     if reward == "graph":
         expected = graph_similarity(pred.next_nodes, state[GOAL_KP_NODE_EMB]) / K
+    elif reward == "graph_distance":
+        expected = -(pred_nodes - state[GOAL_KP_NODE_EMB]).pow(2).sum(-1).mean(-1)
     else:
         expected = -chamfer_distance(pred.next_pos, state[GOAL_KP_POS])
     assert torch.allclose(out["reward"], expected.unsqueeze(-1), atol=1e-5)
@@ -78,7 +81,7 @@ def test_step_reward_matches_the_definition(reward: str) -> None:
     assert torch.equal(out[GOAL_KP_NODE_EMB], state[GOAL_KP_NODE_EMB])  # goal carried along
 
 
-@pytest.mark.parametrize("reward", ["graph", "keypoints"])
+@pytest.mark.parametrize("reward", ["graph", "graph_distance", "keypoints"])
 def test_planner_finds_actions_the_model_scores_highly(reward: str) -> None:
     model = tiny_model()
     torch.manual_seed(0)

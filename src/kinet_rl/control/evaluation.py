@@ -38,7 +38,11 @@ from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 
 logger = logging.getLogger(__name__)
 
-KINET_REWARDS = {"kinet_graph": "graph", "kinet_keypoints": "keypoints"}
+KINET_REWARDS = {
+    "kinet_graph": "graph",
+    "kinet_graph_distance": "graph_distance",
+    "kinet_keypoints": "keypoints",
+}
 
 
 @dataclass(frozen=True)
@@ -69,7 +73,9 @@ class RearrangementSettings:
         generalization_episodes: Episodes per generalization cell.
         workers: Parallel worker processes (<= 1 runs inline).
         seed: Seed of the first episode.
-        videos: Episodes of ``kinet_graph`` recorded as GIFs.
+        videos: Episodes of ``kinet_method`` recorded as GIFs.
+        kinet_method: The KINet planner of the generalization conditions and the videos
+            (``kinet_graph`` or ``kinet_graph_distance``).
     """
 
     scene: SceneSettings = field(default_factory=SceneSettings)
@@ -100,8 +106,13 @@ class RearrangementSettings:
     workers: int = 2
     seed: int = 10_000
     videos: int = 1
+    kinet_method: str = "kinet_graph_distance"
 
     def __post_init__(self) -> None:
+        if self.kinet_method not in ("kinet_graph", "kinet_graph_distance"):
+            raise ValueError(
+                f"kinet_method={self.kinet_method!r}; choose kinet_graph or kinet_graph_distance."
+            )
         unknown = [m for m in self.methods if m not in METHODS + BASELINE_METHODS]
         if unknown:
             raise ValueError(
@@ -153,7 +164,7 @@ class RearrangementSettings:
                     Condition(
                         f"n{n}_geom_{geometry}",
                         scene,
-                        ("kinet_graph",),
+                        (self.kinet_method,),
                         self.generalization_episodes,
                     )
                 )
@@ -163,7 +174,7 @@ class RearrangementSettings:
                 Condition(
                     f"background_{background}",
                     scene,
-                    ("kinet_graph", "random"),
+                    (self.kinet_method, "random"),
                     self.generalization_episodes,
                 )
             )
@@ -255,14 +266,14 @@ def _run_job_in_worker(args: tuple[Job, RearrangementSettings]) -> tuple[Job, Ep
 
 
 def make_jobs(settings: RearrangementSettings, conditions: Iterable[Condition]) -> list[Job]:
-    """All episodes of all conditions; the first ``videos`` KINet-GraphMPC comparison episodes are recorded."""
+    """All episodes of all conditions; the first ``videos`` ``kinet_method`` comparison episodes are recorded."""
     jobs = []
     for condition in conditions:
         for method in condition.methods:
             for i in range(condition.episodes):
                 record = (
                     condition.name == "comparison"
-                    and method == "kinet_graph"
+                    and method == settings.kinet_method
                     and i < settings.videos
                 )
                 jobs.append(Job(condition.name, method, settings.seed + i, condition.scene, record))

@@ -36,7 +36,7 @@ from kinet_rl.keys import ACTION, GOAL_OBJECT_POS, OBJECT_POS
 from kinet_rl.planners import GraphMPCPlanner
 
 #: Controllers compared by the evaluation.
-METHODS = ("kinet_graph", "kinet_keypoints", "random", "oracle")
+METHODS = ("kinet_graph", "kinet_graph_distance", "kinet_keypoints", "random", "oracle")
 #: Controllers of baseline models: MPC on the distance to the goal with the model's own state
 #: (:class:`kinet_rl.baselines.model_env.BaselineMPCController`).
 BASELINE_METHODS = ("model_mpc",)

@@ -17,7 +17,8 @@ if TYPE_CHECKING:
     from kinet_rl.control.rearrange import EpisodeResult
 
 LABELS = {
-    "kinet_graph": "KINet-GraphMPC",
+    "kinet_graph": "KINet-GraphMPC (paper S)",
+    "kinet_graph_distance": "KINet-GraphMPC (embedding distance)",
     "kinet_keypoints": "MPC on keypoint positions",
     "random": "Random pushes",
     "oracle": "Oracle MPC (GT state, analytic push model)",
@@ -56,6 +57,7 @@ def plot_curves(by_method: dict[str, dict[str, Any]], path: Path, title: str) ->
 def markdown(settings: RearrangementSettings, summary: Summary, plot_name: str) -> str:
     """The markdown section: settings, comparison table, Table II layout and backgrounds."""
     task, scene = settings.task, settings.scene
+    kinet = LABELS[settings.kinet_method]
     lines = [
         "## Rearrangement (GraphMPC)",
         "",
@@ -82,14 +84,14 @@ def markdown(settings: RearrangementSettings, summary: Summary, plot_name: str) 
         geometries = [g for g in settings.geometries if any(k.endswith(f"geom_{g}") for k in cells)]
         lines += [
             "",
-            "Generalization (KINet-GraphMPC distance at T, mm, start in brackets; paper Table II layout):",
+            f"Generalization ({kinet} distance at T, mm, start in brackets; paper Table II layout):",
             "",
             "| N | " + " | ".join(f"geom_{g}" for g in geometries) + " |",
             "|---|" + "---|" * len(geometries),
         ]
         for n in settings.num_objects:
             row = [
-                _final(cells.get(f"n{n}_geom_{g}", {}).get("kinet_graph"), with_start=True)
+                _final(cells.get(f"n{n}_geom_{g}", {}).get(settings.kinet_method), with_start=True)
                 for g in geometries
             ]
             lines.append(f"| {n} | " + " | ".join(row) + " |")
@@ -99,12 +101,12 @@ def markdown(settings: RearrangementSettings, summary: Summary, plot_name: str) 
             "",
             "Backgrounds (final distance at T, mm):",
             "",
-            "| background | KINet-GraphMPC | Random pushes |",
+            f"| background | {kinet} | Random pushes |",
             "|---|---|---|",
         ]
         for name, by_method in backgrounds.items():
             lines.append(
-                f"| {name.removeprefix('background_')} | {_final(by_method.get('kinet_graph'))} | "
+                f"| {name.removeprefix('background_')} | {_final(by_method.get(settings.kinet_method))} | "
                 f"{_final(by_method.get('random'))} |"
             )
     return "\n".join(lines) + "\n"
@@ -169,7 +171,7 @@ def write_report(
     for name, by_method in summary.items():
         if name.startswith("background_"):
             files.append(plot_curves(by_method, out_dir / f"rearrangement_{name}.png", name))
-    for result in results.get("comparison", {}).get("kinet_graph", []):
+    for result in results.get("comparison", {}).get(settings.kinet_method, []):
         if result.frames:
             files.append(write_video(result, out_dir / f"rearrangement_seed{result.seed}.gif"))
     text = markdown(settings, summary, "rearrangement.png")

@@ -72,7 +72,8 @@ class PushPlanner:
     Args:
         model: A trained KINet world model.
         workspace_half_size: Half the side of the square workspace, metres (0.20 blocks, 0.30 YCB).
-        reward: ``"graph"`` (GraphMPC) or ``"keypoints"`` (MPC on keypoint positions only).
+        reward: ``"graph_distance"`` (default; GraphMPC on embedding distance), ``"graph"`` (the paper's ``S``) or
+            ``"keypoints"`` (MPC on keypoint positions only); see :class:`KINetModelEnv`.
         seed: Seeds the planner's sampling for reproducible pushes (None: global torch RNG).
         **planner_kwargs: :class:`GraphMPCPlanner` settings (``planning_horizon``, ...).
     """
@@ -81,7 +82,7 @@ class PushPlanner:
         self,
         model: KINetWorldModel,
         workspace_half_size: float,
-        reward: str = "graph",
+        reward: str = "graph_distance",
         seed: int | None = None,
         **planner_kwargs: Any,
     ) -> None:

@@ -80,15 +80,23 @@ def table_i(
     return "\n".join(lines)
 
 
-def mpc_table(mpc: Mapping[str, Mapping[str, Any]], rows: Sequence[str], num_steps: int) -> str:
-    """MPC table: final distance (mm, mean ± s.e.) and success rate; ``mpc[row]`` = episode stats."""
+def mpc_table(
+    mpc: Mapping[str, Mapping[str, Any]],
+    rows: Sequence[str],
+    num_steps: int,
+    kinet_method: str = "kinet_graph",
+) -> str:
+    """MPC table: final distance (mm, mean ± s.e.) and success rate; ``mpc[row]`` = episode stats.
+
+    ``kinet_method`` names the planner of the KINet rows (``kinet_graph`` or ``kinet_graph_distance``).
+    """
     lines = [
         f"| model | planner | episodes | start (mm) | after T = {num_steps} (mm) | success |",
         "|---|---|---:|---:|---:|---:|",
     ]
     for row in rows:
         stats = mpc.get(row)
-        planner = _planner(row)
+        planner = _planner(row, kinet_method)
         if stats is None:
             lines.append(f"| {LABELS.get(row, row)} | {planner} | - | - | not run | - |")
             continue
@@ -101,9 +109,11 @@ def mpc_table(mpc: Mapping[str, Mapping[str, Any]], rows: Sequence[str], num_ste
     return "\n".join(lines)
 
 
-def _planner(row: str) -> str:
+def _planner(row: str, kinet_method: str) -> str:
     if row.startswith("kinet"):
-        return "GraphMPC (graph similarity to the goal image)"
+        if kinet_method == "kinet_graph_distance":
+            return "GraphMPC (node-embedding distance to the goal graph)"
+        return "GraphMPC (paper's graph similarity S to the goal graph)"
     if row in ("forw", "forwinv"):
         return "MPC on goal-image feature distance"
     if row in ("in", "visin", "oracle"):
@@ -117,21 +127,38 @@ def table_ii(
     num_objects: Sequence[int],
     geometries: Sequence[str],
 ) -> str:
-    """Table II: MPC final distance (mm, mean ± s.e.) per object count; ``cells[model][cell]``."""
+    """Table II: MPC final distance (mm, mean ± s.e.) per object count; ``cells[model][cell]``.
+
+    One ``start`` column per geometry gives the episodes' initial distance (the same episodes for
+    every model), so that a final distance can be read as an improvement or not.
+    """
     columns = [(m, g) for m in models for g in geometries]
     lines = [
         "| objects | "
+        + " | ".join(f"start {g} geom. (mm)" for g in geometries)
+        + " | "
         + " | ".join(f"{LABELS.get(m, m)} {g} geom. (mm)" for m, g in columns)
         + " |",
-        "|---:|" + "---:|" * len(columns),
+        "|---:|" + "---:|" * (len(geometries) + len(columns)),
     ]
     for n in num_objects:
-        row = [
+        starts = [_initial_distance(cells, models, f"n{n}_geom_{g}") for g in geometries]
+        finals = [
             _mm(cells.get(m, {}).get(f"n{n}_geom_{g}"), "final_distance", "final_distance_sem")
             for m, g in columns
         ]
-        lines.append(f"| {n} | " + " | ".join(row) + " |")
+        lines.append(f"| {n} | " + " | ".join(starts + finals) + " |")
     return "\n".join(lines)
+
+
+def _initial_distance(
+    cells: Mapping[str, Mapping[str, Any]], models: Sequence[str], cell: str
+) -> str:
+    for model in models:
+        stats = cells.get(model, {}).get(cell)
+        if stats is not None:
+            return f"{stats['initial_distance'] * 1e3:.1f}"
+    return "-"
 
 
 def plot_mpc_curves(mpc: Mapping[str, Mapping[str, Any]], path: Path) -> Path:
