@@ -131,7 +131,8 @@ def run_row(tables: DictConfig, model: str, camera: str, out_dir: Path) -> dict[
 
     row: dict[str, Any] = {"forward": _cached(run_dir / "tables_forward.json", forward)}
     if camera == tables.mpc_camera:
-        method = tables.eval.kinet_method if isinstance(net, KINetWorldModel) else "model_mpc"
+        kinet_method = eval_overrides.get("kinet_method", cfg.eval.kinet_method)
+        method = kinet_method if isinstance(net, KINetWorldModel) else "model_mpc"
         generalization = model in tables.generalization_models
 
         def mpc() -> dict[str, Any]:
