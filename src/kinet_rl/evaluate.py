@@ -1,7 +1,7 @@
 """Rearrangement evaluation of a trained KINet: ``python -m kinet_rl.evaluate +exp=<name> checkpoint=<path>``.
 
-Runs KINet-GraphMPC (the paper's ``S`` and the embedding distance), MPC on keypoint positions only, random pushes and the oracle MPC on the
-experiment's scene, the generalization table (1-5 objects x train/gen geometry) and extra
+Runs KINet-GraphMPC (the paper's ``S`` and the embedding distance), MPC on keypoint positions
+only, random pushes and the oracle MPC on the experiment's scene, the generalization table (1-5 objects x train/gen geometry) and extra
 backgrounds, with settings from the ``eval`` group (``conf/eval/rearrange.yaml``). Writes plots,
 GIFs, ``rearrangement.md`` and ``rearrangement.json`` to ``<run dir>/rearrangement``. Without
 ``checkpoint`` it uses ``<run dir>/kinet.pt`` (the training run of the same experiment).

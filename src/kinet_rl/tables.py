@@ -103,11 +103,13 @@ def _cached(path: Path, compute) -> Any:
 
 
 def rearrangement_settings(
-    cfg: DictConfig, eval_overrides: Mapping[str, Any], methods: list[str]
+    cfg: DictConfig, eval_overrides: Mapping[str, Any], methods: list[str] | None = None
 ) -> RearrangementSettings:
-    """The row's eval group with the table scale's overrides and the given methods."""
+    """The row's eval group with the table scale's overrides and, if given, these methods."""
     container = cast(dict[str, Any], OmegaConf.to_container(cfg, resolve=True))
-    eval_cfg = {**container["eval"], **eval_overrides, "methods": methods}
+    eval_cfg = {**container["eval"], **eval_overrides}
+    if methods is not None:
+        eval_cfg["methods"] = methods
     return RearrangementSettings.from_dicts(eval_cfg, container["env"])
 
 
@@ -131,7 +133,7 @@ def run_row(tables: DictConfig, model: str, camera: str, out_dir: Path) -> dict[
 
     row: dict[str, Any] = {"forward": _cached(run_dir / "tables_forward.json", forward)}
     if camera == tables.mpc_camera:
-        kinet_method = eval_overrides.get("kinet_method", cfg.eval.kinet_method)
+        kinet_method = rearrangement_settings(cfg, eval_overrides).kinet_method
         method = kinet_method if isinstance(net, KINetWorldModel) else "model_mpc"
         generalization = model in tables.generalization_models
 

@@ -38,6 +38,8 @@ from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 
 logger = logging.getLogger(__name__)
 
+#: GraphMPC methods: the paper's similarity ``S`` and the node-embedding distance.
+KINET_GRAPH_METHODS = ("kinet_graph", "kinet_graph_distance")
 KINET_REWARDS = {
     "kinet_graph": "graph",
     "kinet_graph_distance": "graph_distance",
@@ -74,8 +76,8 @@ class RearrangementSettings:
         workers: Parallel worker processes (<= 1 runs inline).
         seed: Seed of the first episode.
         videos: Episodes of ``kinet_method`` recorded as GIFs.
-        kinet_method: The KINet planner of the generalization conditions and the videos
-            (``kinet_graph`` or ``kinet_graph_distance``).
+        kinet_method: The KINet planner of the generalization conditions and the videos (one of
+            ``KINET_GRAPH_METHODS``).
     """
 
     scene: SceneSettings = field(default_factory=SceneSettings)
@@ -109,9 +111,9 @@ class RearrangementSettings:
     kinet_method: str = "kinet_graph_distance"
 
     def __post_init__(self) -> None:
-        if self.kinet_method not in ("kinet_graph", "kinet_graph_distance"):
+        if self.kinet_method not in KINET_GRAPH_METHODS:
             raise ValueError(
-                f"kinet_method={self.kinet_method!r}; choose kinet_graph or kinet_graph_distance."
+                f"kinet_method={self.kinet_method!r}; choose one of {list(KINET_GRAPH_METHODS)}."
             )
         unknown = [m for m in self.methods if m not in METHODS + BASELINE_METHODS]
         if unknown:

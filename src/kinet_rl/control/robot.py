@@ -72,8 +72,9 @@ class PushPlanner:
     Args:
         model: A trained KINet world model.
         workspace_half_size: Half the side of the square workspace, metres (0.20 blocks, 0.30 YCB).
-        reward: ``"graph_distance"`` (default; GraphMPC on embedding distance), ``"graph"`` (the paper's ``S``) or
-            ``"keypoints"`` (MPC on keypoint positions only); see :class:`KINetModelEnv`.
+        reward: ``"graph_distance"`` (default; GraphMPC on the node-embedding distance),
+            ``"graph"`` (the paper's ``S``) or ``"keypoints"`` (MPC on keypoint positions only);
+            see :class:`KINetModelEnv`.
         seed: Seeds the planner's sampling for reproducible pushes (None: global torch RNG).
         **planner_kwargs: :class:`GraphMPCPlanner` settings (``planning_horizon``, ...).
     """

@@ -16,6 +16,7 @@ from typing import Any
 import torch
 
 from kinet_rl.atomic import atomic_save_with
+from kinet_rl.control.report import LABELS as CONTROL_LABELS
 from kinet_rl.evaluation.forward import ObjectRollout, start_frames
 from kinet_rl.evaluation.metrics import position_error
 
@@ -28,8 +29,8 @@ LABELS = {
     "forwinv": "ForwInv",
     "in": "IN (GT state)",
     "visin": "VisIN (GT state + image)",
-    "random": "Random pushes",
-    "oracle": "Oracle MPC (GT state, analytic push model)",
+    "random": CONTROL_LABELS["random"],
+    "oracle": CONTROL_LABELS["oracle"],
 }
 
 
@@ -84,7 +85,7 @@ def mpc_table(
     mpc: Mapping[str, Mapping[str, Any]],
     rows: Sequence[str],
     num_steps: int,
-    kinet_method: str = "kinet_graph",
+    kinet_method: str,
 ) -> str:
     """MPC table: final distance (mm, mean ± s.e.) and success rate; ``mpc[row]`` = episode stats.
 
@@ -111,9 +112,7 @@ def mpc_table(
 
 def _planner(row: str, kinet_method: str) -> str:
     if row.startswith("kinet"):
-        if kinet_method == "kinet_graph_distance":
-            return "GraphMPC (node-embedding distance to the goal graph)"
-        return "GraphMPC (paper's graph similarity S to the goal graph)"
+        return CONTROL_LABELS[kinet_method]
     if row in ("forw", "forwinv"):
         return "MPC on goal-image feature distance"
     if row in ("in", "visin", "oracle"):
