@@ -1,10 +1,11 @@
 """Rearrangement evaluation of a trained KINet: ``python -m kinet_rl.evaluate +exp=<name> checkpoint=<path>``.
 
 Runs KINet-GraphMPC (the paper's ``S`` and the embedding distance), MPC on keypoint positions
-only, random pushes and the oracle MPC on the experiment's scene, the generalization table (1-5 objects x train/gen geometry) and extra
-backgrounds, with settings from the ``eval`` group (``conf/eval/rearrange.yaml``). Writes plots,
-GIFs, ``rearrangement.md`` and ``rearrangement.json`` to ``<run dir>/rearrangement``. Without
-``checkpoint`` it uses ``<run dir>/kinet.pt`` (the training run of the same experiment).
+only, random pushes and the oracle MPC on the experiment's scene, the generalization table (1-5
+objects x train/gen geometry) and extra backgrounds, with settings from the ``eval`` group
+(``conf/eval/rearrange.yaml``). Writes plots, GIFs, ``rearrangement.md`` and
+``rearrangement.json`` to ``<run dir>/rearrangement``. Without ``checkpoint`` it uses
+``<run dir>/kinet.pt`` (the training run of the same experiment).
 """
 
 from __future__ import annotations
@@ -17,12 +18,13 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
-from kinet_rl.control.evaluation import RearrangementSettings, evaluate_rearrangement
+from kinet_rl.configs import config_dir
 from kinet_rl.models import KINetWorldModel
+from kinet_rl.pipeline import KINET_FILE, evaluate_rearrangement
+from kinet_rl.rearrangement import RearrangementSettings
+from kinet_rl.rearrangement.methods import check_methods
 
 logger = logging.getLogger(__name__)
-
-CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 
 
 def settings_from_config(cfg: DictConfig) -> RearrangementSettings:
@@ -33,18 +35,20 @@ def settings_from_config(cfg: DictConfig) -> RearrangementSettings:
             "defaults or pass +eval=rearrange."
         )
     container = cast(dict[str, Any], OmegaConf.to_container(cfg, resolve=True))
-    return RearrangementSettings.from_dicts(container["eval"], container["env"])
+    settings = RearrangementSettings.from_dicts(container["eval"], container["env"])
+    check_methods(settings)
+    return settings
 
 
 def evaluate(cfg: DictConfig, run_dir: Path) -> dict[str, Any]:
     """Loads the checkpoint and runs the full evaluation; returns its summary."""
-    checkpoint = Path(cfg.get("checkpoint") or run_dir / "kinet.pt")
+    settings = settings_from_config(cfg)
+    checkpoint = Path(cfg.get("checkpoint") or run_dir / KINET_FILE)
     if not checkpoint.is_file():
         raise FileNotFoundError(
             f"No checkpoint at {checkpoint}; train first (python -m kinet_rl.train +exp=...) or "
             "pass checkpoint=<path to kinet.pt>."
         )
-    settings = settings_from_config(cfg)
     model = KINetWorldModel.from_checkpoint(checkpoint)
     logger.info("Evaluating %s on %s", checkpoint, settings.scene)
     return evaluate_rearrangement(
@@ -52,7 +56,7 @@ def evaluate(cfg: DictConfig, run_dir: Path) -> dict[str, Any]:
     )
 
 
-@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
+@hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
 def main(cfg: DictConfig) -> None:
     """Entry point."""
     run_dir = Path(HydraConfig.get().runtime.output_dir)

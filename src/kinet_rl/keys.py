@@ -2,7 +2,7 @@
 
 Shapes use: B batch, T time, K keypoints, N objects, D features, H/W image.
 Transitions follow TorchRL's ``("next", key)`` convention; predictions are written to the
-same keys under ``"next"``.
+same keys under ``"next"``. The env's observation dicts (dm_control) use the same root names.
 """
 
 from __future__ import annotations
@@ -12,10 +12,10 @@ ACTION = "action"  # float32 [*B, 4] push (start x, start y, end x, end y) in [-
 OBJECT_POS = "object_pos"  # float32 [*B, N, 2] metres, table frame (evaluation only)
 OBJECT_YAW = "object_yaw"  # float32 [*B, N] radians (evaluation only)
 UNSTABLE = "unstable"  # bool [*B, 1] the simulation went unstable; the episode ended
-REWARD = ("next", "reward")  # [*B, 1]
-DONE = "done"
-TERMINATED = "terminated"
-TRUNCATED = "truncated"
+STEP_REWARD = "reward"  # [*B, 1] written by a model env's step module (TorchRL nests it)
+REWARD = ("next", STEP_REWARD)  # [*B, 1]
+NEXT_PIXELS = ("next", PIXELS)
+NEXT_OBJECT_POS = ("next", OBJECT_POS)
 
 PIXELS_0 = "pixels_0"  # uint8 [*B, H, W, 3] first frame I_0 of the transition's episode
 EPISODE = "episode"  # int64 [*B] episode index within a dataset
@@ -23,14 +23,11 @@ STEP = "step"  # int64 [*B] push index within its episode
 
 KP_POS = ("keypoints", "pos")  # float32 [*B, K, 2] image coordinates in [-1, 1]
 KP_FEAT = ("keypoints", "feat")  # float32 [*B, K, D]
-GOAL_KP_POS = ("goal", "keypoints", "pos")
-GOAL_KP_FEAT = ("goal", "keypoints", "feat")
 KP_NODE_EMB = ("keypoints", "node_emb")  # float32 [*B, K, E] scene-graph node embeddings
-GOAL_KP_NODE_EMB = (
-    "goal",
-    "keypoints",
-    "node_emb",
-)  # float32 [*B, K, E] goal-graph node embeddings
-GOAL_OBJECT_POS = ("goal", "object_pos")  # float32 [*B, N, 2] metres, goal of the oracle planner
+GOAL_PIXELS = ("goal", PIXELS)  # uint8 [*B, H, W, 3] goal image
+GOAL_KP_POS = ("goal", "keypoints", "pos")
+GOAL_KP_NODE_EMB = ("goal", "keypoints", "node_emb")  # float32 [*B, K, E] goal-graph nodes
+GOAL_OBJECT_POS = ("goal", OBJECT_POS)  # float32 [*B, N, 2] metres, goal of GT-state planners
 OBJECT_FEAT = ("objects", "feat")  # float32 [*B, N, F] per-object visual features (VisIN)
+IMAGE_FEAT = ("image", "feat")  # float32 [*B, D] whole-image feature z (Forw/ForwInv)
 GOAL_IMAGE_FEAT = ("goal", "image", "feat")  # float32 [*B, D] goal-image feature (Forw/ForwInv)

@@ -3,7 +3,7 @@
 Prints one JSON object: the push start and end in metres (table frame, origin at the workspace
 centre, +x right and +y up in the top camera image) and normalised to ``[-1, 1]``. Images must
 come from the camera and resolution the model was trained on. The planner's warm start lives
-only within one process: for closed-loop control call :class:`kinet_rl.control.PushPlanner`
+only within one process: for closed-loop control call :class:`kinet_rl.models.PushPlanner`
 from Python (see docs/planning.md), or pass several ``--image`` files to plan a push for each in
 turn, as if executed one after another.
 """
@@ -20,10 +20,9 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from kinet_rl.control.model_env import REWARDS
-from kinet_rl.control.robot import PushPlanner
 from kinet_rl.envs.workspace import WORKSPACES
-from kinet_rl.models import KINetWorldModel
+from kinet_rl.models import REWARDS, KINetWorldModel, PushPlanner
+from kinet_rl.models.checkpointing import checkpoint_scene
 
 logger = logging.getLogger(__name__)
 
@@ -58,7 +57,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     )
     parser.add_argument(
         "--reward",
-        choices=REWARDS,
+        choices=sorted(REWARDS),
         default="graph_distance",
         help="planning objective (docs/planning.md); graph = the paper's S",
     )
@@ -70,24 +69,18 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def _env_config(checkpoint: Path) -> dict:
-    from kinet_rl.atomic import safe_torch_load
-
-    config = safe_torch_load(checkpoint, ("config",), "KINetWorldModel.save_checkpoint")["config"]
-    return dict(config.get("env") or {})
-
-
 def main(argv: Sequence[str] | None = None) -> list[dict]:
     """Plans one push per ``--image`` and prints each as a JSON line."""
     args = parse_args(argv)
-    env_cfg = _env_config(args.checkpoint)
-    half_size = args.workspace_half_size or WORKSPACES[env_cfg.get("task", "blocks")].half_size
-    size = args.image_size or env_cfg.get("image_size")
     model = KINetWorldModel.from_checkpoint(args.checkpoint)
+    scene = checkpoint_scene(args.checkpoint)
+    task = "blocks" if scene is None else scene.task
+    half_size = args.workspace_half_size or WORKSPACES[task].half_size
+    size = args.image_size or (None if scene is None else scene.image_size)
     planner = PushPlanner(
         model,
         half_size,
-        reward=args.reward,
+        reward=REWARDS[args.reward](),
         seed=args.seed,
         planning_horizon=args.horizon,
         num_candidates=args.candidates,

@@ -2,11 +2,12 @@
 
 For each model (KINet, its ablations and the baselines) and camera, the row's config is the root
 config composed with the experiment ``+exp=blocks_<camera>view<suffix>`` and the scale's
-overrides (``conf/tables/<scale>.yaml``); the row is trained with :func:`kinet_rl.train.train`
-in ``<out>/<exp_name>`` and then evaluated the same way as every other row:
+overrides (``conf/tables/<scale>.yaml``); the row is trained with
+:func:`kinet_rl.pipeline.run_experiment` in ``<out>/<exp_name>`` and then evaluated the same way
+as every other row:
 
 * Table I: single-step forward error on held-out test sequences (same sequences per camera).
-* MPC table (``mpc_camera`` only): :func:`~kinet_rl.control.evaluation.evaluate_rearrangement`
+* MPC table (``mpc_camera`` only): :func:`~kinet_rl.pipeline.evaluate_rearrangement`
   with ``kinet_graph`` (KINet variants) or ``model_mpc`` (baselines), on the same episodes, plus
   random pushes and the oracle.
 * Table II: the generalization cells (1-5 objects x train/gen geometry) of ``generalization_models``.
@@ -28,27 +29,33 @@ from typing import Any, cast
 import hydra
 from hydra import compose
 from hydra.core.hydra_config import HydraConfig
-from hydra.utils import get_class
+from hydra.utils import get_class, instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from kinet_rl.atomic import atomic_write_json, atomic_write_text
-from kinet_rl.control.evaluation import RearrangementSettings, evaluate_rearrangement
-from kinet_rl.data import load_dataset
-from kinet_rl.evaluation.report import scene_geometry
-from kinet_rl.evaluation.tables_report import (
+from kinet_rl.comparison import (
     mpc_table,
     plot_mpc_curves,
     single_step_errors,
     table_i,
     table_ii,
 )
+from kinet_rl.configs import config_dir
+from kinet_rl.data import load_dataset
+from kinet_rl.envs.geometry import SceneGeometry
 from kinet_rl.models import KINetWorldModel
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
-from kinet_rl.train import dataset_path, train
+from kinet_rl.pipeline import (
+    BASELINE_FILE,
+    DATASET_ENV_KEYS,
+    KINET_FILE,
+    ExperimentSettings,
+    evaluate_rearrangement,
+    run_experiment,
+)
+from kinet_rl.rearrangement import RearrangementSettings
 
 logger = logging.getLogger(__name__)
-
-CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 
 #: Experiment-name suffix of each row model (``conf/exp/blocks_<camera>view<suffix>.yaml``).
 EXPERIMENT_SUFFIX = {
@@ -89,7 +96,7 @@ def row_config(tables: DictConfig, model: str, camera: str) -> DictConfig:
 def load_model(cfg: DictConfig, run_dir: Path) -> Any:
     """The trained model of a row: ``kinet.pt`` (KINet) or ``model.pt`` (baselines)."""
     model_class = cast(type[ConfigCheckpointMixin], get_class(cfg.model._target_))
-    name = "kinet.pt" if issubclass(model_class, KINetWorldModel) else "model.pt"
+    name = KINET_FILE if issubclass(model_class, KINetWorldModel) else BASELINE_FILE
     model: Any = model_class.from_checkpoint(run_dir / name)
     return model.cpu().eval()
 
@@ -102,11 +109,16 @@ def _cached(path: Path, compute) -> Any:
     return value
 
 
+def to_dict(node: DictConfig) -> dict[str, Any]:
+    """A config node as a resolved plain dict."""
+    return cast(dict[str, Any], OmegaConf.to_container(node, resolve=True))
+
+
 def rearrangement_settings(
     cfg: DictConfig, eval_overrides: Mapping[str, Any], methods: list[str] | None = None
 ) -> RearrangementSettings:
     """The row's eval group with the table scale's overrides and, if given, these methods."""
-    container = cast(dict[str, Any], OmegaConf.to_container(cfg, resolve=True))
+    container = to_dict(cfg)
     eval_cfg = {**container["eval"], **eval_overrides}
     if methods is not None:
         eval_cfg["methods"] = methods
@@ -120,15 +132,24 @@ def run_row(tables: DictConfig, model: str, camera: str, out_dir: Path) -> dict[
     if not (run_dir / "results.json").is_file():
         start = time.monotonic()
         logger.info("Training %s in %s", cfg.exp_name, run_dir)
-        train(cfg, run_dir)
+        run_experiment(
+            ExperimentSettings.from_container(to_dict(cfg)),
+            lambda: instantiate(cfg.model, _convert_="all"),
+            lambda model: instantiate(cfg.loss, world_model=model, _convert_="all"),
+            run_dir,
+        )
         logger.info("Trained %s in %.0f s", cfg.exp_name, time.monotonic() - start)
     net = load_model(cfg, run_dir)
-    eval_overrides = cast(dict[str, Any], OmegaConf.to_container(tables.eval, resolve=True))
+    eval_overrides = to_dict(tables.eval)
 
     def forward() -> dict[str, Any]:
-        expect = {k: cfg.env[k] for k in ("task", "camera", "image_size", "num_objects")}
-        test = load_dataset(dataset_path(cfg), "test", expect)
-        rollout = net.object_rollout(scene_geometry(cfg.env))
+        settings = ExperimentSettings.from_container(to_dict(cfg))
+        expect = {k: settings.env[k] for k in DATASET_ENV_KEYS}
+        test = load_dataset(settings.dataset_path, "test", expect)
+        scene = settings.scene
+        rollout = net.object_rollout(
+            SceneGeometry.of_scene(scene.task, scene.camera, scene.image_size)
+        )
         return single_step_errors(rollout, test, tables.forward_sequences, seed=cfg.seed)
 
     row: dict[str, Any] = {"forward": _cached(run_dir / "tables_forward.json", forward)}
@@ -153,7 +174,7 @@ def run_row(tables: DictConfig, model: str, camera: str, out_dir: Path) -> dict[
 def references(tables: DictConfig, out_dir: Path) -> tuple[dict[str, Any], RearrangementSettings]:
     """Random pushes and the oracle on the MPC table's episodes (no model), and the settings."""
     cfg = row_config(tables, tables.models[0], tables.mpc_camera)
-    eval_overrides = cast(dict[str, Any], OmegaConf.to_container(tables.eval, resolve=True))
+    eval_overrides = to_dict(tables.eval)
     settings = rearrangement_settings(cfg, eval_overrides, ["random", "oracle"])
 
     def compute() -> dict[str, Any]:
@@ -226,7 +247,7 @@ def build_tables(tables: DictConfig, out_dir: Path) -> Path:
     return path
 
 
-@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="tables")
+@hydra.main(version_base="1.3", config_path=config_dir(), config_name="tables")
 def main(cfg: DictConfig) -> None:
     """Entry point."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)

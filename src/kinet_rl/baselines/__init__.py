@@ -1,33 +1,36 @@
-"""Baseline forward models of the KINet paper (Table I): Forw, ForwInv, IN and VisIN.
+"""Baselines of the KINet paper: Forw, ForwInv, IN and VisIN (Table I), their model envs, and
+the oracle's analytic push model on ground-truth state.
 
-Each is an ``nn.Module`` with a TorchRL loss, ``object_rollout(geometry)`` for forward-prediction
-evaluation and ``save_checkpoint``/``from_checkpoint``. See ``docs/baselines.md``.
+Each model is an ``nn.Module`` with a TorchRL loss, ``object_rollout(geometry)`` for
+forward-prediction evaluation and ``save_checkpoint``/``from_checkpoint``. See ``docs/baselines.md``.
 """
 
 from __future__ import annotations
 
 from kinet_rl.baselines.encoders import ConvEncoder, crop_objects
 from kinet_rl.baselines.image_models import (
-    IMAGE_FEAT,
     FeatureObjectRollout,
     ImageForwardInverseModel,
     ImageForwardModel,
     MotionProbe,
 )
 from kinet_rl.baselines.losses import ImageForwardLoss, ObjectForwardLoss, feature_info_nce
+from kinet_rl.baselines.model_env import FeatureModelEnv, ObjectModelEnv, make_baseline_env
 from kinet_rl.baselines.object_models import (
     ObjectCountError,
     ObjectInteractionModel,
     ObjectStateRollout,
     VisualInteractionModel,
 )
+from kinet_rl.baselines.oracle import AnalyticPushModelEnv, analytic_push
 from kinet_rl.baselines.toy_pushing import ToyPushData
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 
 __all__ = [
-    "IMAGE_FEAT",
+    "AnalyticPushModelEnv",
     "ConfigCheckpointMixin",
     "ConvEncoder",
+    "FeatureModelEnv",
     "FeatureObjectRollout",
     "ImageForwardInverseModel",
     "ImageForwardLoss",
@@ -36,9 +39,12 @@ __all__ = [
     "ObjectCountError",
     "ObjectForwardLoss",
     "ObjectInteractionModel",
+    "ObjectModelEnv",
     "ObjectStateRollout",
     "ToyPushData",
     "VisualInteractionModel",
+    "analytic_push",
     "crop_objects",
     "feature_info_nce",
+    "make_baseline_env",
 ]

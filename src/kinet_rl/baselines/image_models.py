@@ -23,14 +23,12 @@ from tensordict import TensorDictBase
 from torch import Tensor, nn
 
 from kinet_rl.baselines.encoders import ConvEncoder
+from kinet_rl.devices import model_device
+from kinet_rl.envs.geometry import SceneGeometry
 from kinet_rl.envs.workspace import workspace_for
-from kinet_rl.evaluation.forward import SceneGeometry, model_device
-from kinet_rl.keys import ACTION, OBJECT_POS, PIXELS
+from kinet_rl.keys import ACTION, IMAGE_FEAT, OBJECT_POS, PIXELS
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.models.interaction import ACTION_DIM, mlp
-
-#: Whole-image feature ``z`` ``[*B, D]`` of the Forw/ForwInv baselines.
-IMAGE_FEAT = ("image", "feat")
 
 
 class MotionProbe(nn.Module):

@@ -13,7 +13,7 @@ from torchrl.objectives import LossModule
 
 from kinet_rl.baselines.image_models import ImageForwardInverseModel, ImageForwardModel
 from kinet_rl.baselines.object_models import ObjectInteractionModel
-from kinet_rl.keys import ACTION, OBJECT_POS, PIXELS
+from kinet_rl.keys import ACTION, NEXT_OBJECT_POS, NEXT_PIXELS, OBJECT_POS, PIXELS
 from kinet_rl.models.losses import check_loss_weights
 
 
@@ -94,7 +94,7 @@ class ImageForwardLoss(LossModule):
         """Computes the weighted losses (see class docstring)."""
         pixels, next_pixels, action, pos, next_pos = _require(
             tensordict,
-            [PIXELS, ("next", PIXELS), ACTION, OBJECT_POS, ("next", OBJECT_POS)],
+            [PIXELS, NEXT_PIXELS, ACTION, OBJECT_POS, NEXT_OBJECT_POS],
             type(self.world_model).__name__,
         )
         model = self.world_model
@@ -139,7 +139,7 @@ class ObjectForwardLoss(LossModule):
     def forward(self, tensordict: TensorDictBase) -> TensorDict:
         """Computes the weighted loss (see class docstring)."""
         pos, next_pos, action = _require(
-            tensordict, [OBJECT_POS, ("next", OBJECT_POS), ACTION], type(self.world_model).__name__
+            tensordict, [OBJECT_POS, NEXT_OBJECT_POS, ACTION], type(self.world_model).__name__
         )
         model = self.world_model
         predicted = model.predict(pos, model.node_features(tensordict), action)

@@ -8,31 +8,31 @@
 * Forw / ForwInv (:class:`FeatureModelEnv`): state = the whole-image feature ``z``; reward =
   ``-|z_hat - z_goal|^2`` with ``z_goal`` the feature of the goal image.
 
-:class:`BaselineMPCController` runs :class:`~kinet_rl.planners.GraphMPCPlanner` over either env
-and follows the ``Controller`` protocol of :mod:`kinet_rl.control.rearrange`, so the shared
-rearrangement evaluation can run a baseline checkpoint (method ``model_mpc``).
+Both share :class:`~kinet_rl.planners.StateModelEnv` with the oracle's and KINet's model envs;
+the rearrangement evaluation plans over them with :class:`~kinet_rl.planners.GraphMPCPlanner`
+(method ``model_mpc``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
-
-import numpy as np
 import torch
-from tensordict import TensorDict, TensorDictBase
+from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 from torch import Tensor, nn
-from torchrl.data import Bounded, Composite, Unbounded
-from torchrl.envs.model_based import ModelBasedEnvBase
 
-from kinet_rl.baselines.image_models import IMAGE_FEAT, ImageForwardModel
+from kinet_rl.baselines.image_models import ImageForwardModel
 from kinet_rl.baselines.object_models import ObjectInteractionModel
-from kinet_rl.keys import ACTION, GOAL_IMAGE_FEAT, GOAL_OBJECT_POS, OBJECT_FEAT, OBJECT_POS, PIXELS
-from kinet_rl.planners import GraphMPCPlanner
-
-if TYPE_CHECKING:
-    from kinet_rl.control.rearrange import Episode
+from kinet_rl.keys import (
+    ACTION,
+    GOAL_IMAGE_FEAT,
+    GOAL_OBJECT_POS,
+    IMAGE_FEAT,
+    OBJECT_FEAT,
+    OBJECT_POS,
+    PIXELS,
+    STEP_REWARD,
+)
+from kinet_rl.planners.model_env import StateModelEnv
 
 
 class _ObjectStep(nn.Module):
@@ -59,32 +59,7 @@ class _FeatureStep(nn.Module):
         return nxt, reward, goal
 
 
-class _BaselineModelEnv(ModelBasedEnvBase):
-    """Shared construction: a TD step module, a full state spec, a 4-d push action in [-1, 1]."""
-
-    def __init__(self, step: TensorDictModule, state_shapes: Mapping[Any, tuple[int, ...]]) -> None:
-        device = next(step.parameters(), torch.empty(0)).device
-        super().__init__(step, device=device, batch_size=torch.Size([]))
-        state = Composite(
-            {key: Unbounded(shape, device=device) for key, shape in state_shapes.items()},
-            device=device,
-        )
-        self.observation_spec = state.clone()
-        self.state_spec = state
-        self.action_spec = Bounded(-1.0, 1.0, (4,), device=device)
-        self.reward_spec = Unbounded((1,), device=device)
-
-    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
-        keys = list(self.state_spec.keys(True, True))
-        if tensordict is None or any(key not in tensordict.keys(True) for key in keys):
-            raise KeyError(
-                f"{type(self).__name__}.reset needs a tensordict with the state keys {keys}; "
-                "env.observe(...) builds it from an observation and a goal."
-            )
-        return tensordict.select(*keys).clone()
-
-
-class ObjectModelEnv(_BaselineModelEnv):
+class ObjectModelEnv(StateModelEnv):
     """Imagined pushes with IN or VisIN on ground-truth object positions.
 
     Keys:
@@ -101,7 +76,7 @@ class ObjectModelEnv(_BaselineModelEnv):
         step = TensorDictModule(
             _ObjectStep(model),
             in_keys=[OBJECT_POS, OBJECT_FEAT, ACTION, GOAL_OBJECT_POS],
-            out_keys=[OBJECT_POS, OBJECT_FEAT, "reward", GOAL_OBJECT_POS],
+            out_keys=[OBJECT_POS, OBJECT_FEAT, STEP_REWARD, GOAL_OBJECT_POS],
         )
         n, f = model.num_objects, model.node_feature_dim
         super().__init__(step, {OBJECT_POS: (n, 2), OBJECT_FEAT: (n, f), GOAL_OBJECT_POS: (n, 2)})
@@ -135,7 +110,7 @@ class ObjectModelEnv(_BaselineModelEnv):
         )
 
 
-class FeatureModelEnv(_BaselineModelEnv):
+class FeatureModelEnv(StateModelEnv):
     """Imagined pushes with Forw or ForwInv in the feature space of the whole image.
 
     Keys:
@@ -150,7 +125,7 @@ class FeatureModelEnv(_BaselineModelEnv):
         step = TensorDictModule(
             _FeatureStep(model),
             in_keys=[IMAGE_FEAT, ACTION, GOAL_IMAGE_FEAT],
-            out_keys=[IMAGE_FEAT, "reward", GOAL_IMAGE_FEAT],
+            out_keys=[IMAGE_FEAT, STEP_REWARD, GOAL_IMAGE_FEAT],
         )
         d = model.config["feature_dim"]
         super().__init__(step, {IMAGE_FEAT: (d,), GOAL_IMAGE_FEAT: (d,)})
@@ -184,43 +159,3 @@ def make_baseline_env(model: nn.Module) -> ObjectModelEnv | FeatureModelEnv:
         f"No baseline model env for {type(model).__name__}; model_mpc plans with IN, VisIN, Forw "
         "or ForwInv (use the kinet_graph / kinet_keypoints methods for KINet)."
     )
-
-
-class BaselineMPCController:
-    """MPC on the distance to the goal with a baseline model (``Controller`` protocol).
-
-    IN/VisIN plan on the true object positions towards the true goal positions; Forw/ForwInv
-    plan on image features towards the goal image's feature.
-
-    Args:
-        model: A baseline model (see :func:`make_baseline_env`).
-        planner: :class:`GraphMPCPlanner` settings.
-        seed: Seed of the planner's sampling.
-    """
-
-    def __init__(self, model: nn.Module, planner: Mapping[str, Any], seed: int) -> None:
-        self.env = make_baseline_env(model)
-        self.planner = GraphMPCPlanner(
-            self.env, generator=torch.Generator().manual_seed(seed), **dict(planner)
-        )
-        self.episode: Episode | None = None
-
-    def reset(self, episode: Episode) -> None:
-        """Keeps the episode's goal and clears the warm start."""
-        self.episode = episode
-        self.planner.reset()
-
-    def act(self, observation: dict[str, np.ndarray]) -> np.ndarray:
-        """Plans from the current observation (``pixels``, ``object_pos``)."""
-        if self.episode is None:
-            raise RuntimeError(
-                "BaselineMPCController.act called before reset(episode); reset it first."
-            )
-        pixels = torch.from_numpy(np.array(observation["pixels"]))
-        if isinstance(self.env, ObjectModelEnv):
-            pos = torch.as_tensor(observation["object_pos"], dtype=torch.float32)
-            goal = torch.as_tensor(self.episode.goal_pos, dtype=torch.float32)
-            state = self.env.observe(pixels, pos, goal)
-        else:
-            state = self.env.observe(pixels, torch.from_numpy(np.array(self.episode.goal_pixels)))
-        return self.planner(state).get(ACTION).cpu().numpy()

@@ -26,14 +26,15 @@ from tensordict import TensorDictBase
 from torch import Tensor, nn
 
 from kinet_rl.baselines.encoders import ConvEncoder, crop_objects
-from kinet_rl.envs.workspace import workspace_for
-from kinet_rl.evaluation.forward import SceneGeometry, model_device
-from kinet_rl.evaluation.projection import (
+from kinet_rl.devices import model_device
+from kinet_rl.envs.geometry import (
     OBJECT_CENTRE_HEIGHT,
     CameraProjection,
+    SceneGeometry,
     camera_projection,
 )
-from kinet_rl.keys import ACTION, OBJECT_POS, PIXELS
+from kinet_rl.envs.workspace import workspace_for
+from kinet_rl.keys import ACTION, NEXT_OBJECT_POS, OBJECT_POS, PIXELS
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.models.interaction import KeypointInteractionNet
 
@@ -130,7 +131,7 @@ class ObjectInteractionModel(ConfigCheckpointMixin, nn.Module):
         next_pos = self.predict(
             tensordict.get(OBJECT_POS), self.node_features(tensordict), tensordict.get(ACTION)
         )
-        tensordict.set(("next", OBJECT_POS), next_pos)
+        tensordict.set(NEXT_OBJECT_POS, next_pos)
         return tensordict
 
     def object_rollout(self, geometry: SceneGeometry | None = None) -> ObjectStateRollout:

@@ -15,9 +15,8 @@ import torch
 from tensordict import TensorDict
 from torch import Tensor
 
+from kinet_rl.envs.geometry import SceneGeometry
 from kinet_rl.envs.workspace import workspace_for
-from kinet_rl.evaluation.forward import SceneGeometry
-from kinet_rl.evaluation.projection import OBJECT_CENTRE_HEIGHT, camera_projection
 
 COLOURS = torch.tensor(
     [[220, 40, 40], [40, 190, 40], [40, 60, 220], [220, 200, 40], [200, 40, 200]],
@@ -85,9 +84,7 @@ class ToyPushData:
     ) -> None:
         if not 1 <= num_objects <= len(COLOURS):
             raise ValueError(f"num_objects must be in [1, {len(COLOURS)}], got {num_objects}.")
-        self.geometry = SceneGeometry(
-            camera_projection(TASK, "top"), image_size, OBJECT_CENTRE_HEIGHT[TASK]
-        )
+        self.geometry = SceneGeometry.of_scene(TASK, "top", image_size)
         workspace = workspace_for(TASK).half_size
         gen = torch.Generator().manual_seed(seed)
         pos = (torch.rand(num_episodes, num_objects, 2, generator=gen) * 2 - 1) * 0.7 * workspace

@@ -27,7 +27,15 @@ from kinet_rl.data.policy import (
     read_workspace_half_size,
 )
 from kinet_rl.data.storage import FORMAT_VERSION, METADATA_FILE, EpisodeWriter, read_json
-from kinet_rl.keys import ACTION, OBJECT_POS, OBJECT_YAW, PIXELS, UNSTABLE
+from kinet_rl.keys import (
+    ACTION,
+    NEXT_OBJECT_POS,
+    NEXT_PIXELS,
+    OBJECT_POS,
+    OBJECT_YAW,
+    PIXELS,
+    UNSTABLE,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -98,10 +106,10 @@ def assemble_episode(rows: TensorDictBase, episode_length: int) -> TensorDictBas
     last = rows[-1]
     return TensorDict(
         {
-            "pixels": torch.cat([rows.get(PIXELS), last.get(("next", PIXELS))[None]]),
-            "action": rows.get(ACTION),
-            "object_pos": torch.cat([rows.get(OBJECT_POS), last.get(("next", OBJECT_POS))[None]]),
-            "object_yaw": torch.cat([rows.get(OBJECT_YAW), last.get(("next", OBJECT_YAW))[None]]),
+            PIXELS: torch.cat([rows.get(PIXELS), last.get(NEXT_PIXELS)[None]]),
+            ACTION: rows.get(ACTION),
+            OBJECT_POS: torch.cat([rows.get(OBJECT_POS), last.get(NEXT_OBJECT_POS)[None]]),
+            OBJECT_YAW: torch.cat([rows.get(OBJECT_YAW), last.get(("next", OBJECT_YAW))[None]]),
             "source_episode": rows.get(EPISODE_ID)[0, 0],
         }
     )

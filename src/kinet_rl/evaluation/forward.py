@@ -1,48 +1,24 @@
-"""Forward-prediction evaluation of a KINet world model on held-out episodes.
+"""Forward-prediction evaluation of world models on held-out episodes (Table I).
 
-Object positions are predicted from keypoints without ground truth from the predicted steps:
-keypoints are related to objects in the frame where the prediction starts
-(:func:`~kinet_rl.evaluation.metrics.keypoint_membership`, in image space), the model rolls the
-keypoints forward open-loop with the logged pushes, and each object moves by the mean motion of its
-keypoints measured on the table plane (:class:`~kinet_rl.evaluation.projection.CameraProjection`).
+Every model offers ``object_rollout(geometry)``, an :class:`ObjectRollout` that predicts object
+positions from the frame where a prediction starts and the logged pushes, with no ground truth from
+the predicted steps (KINet reads them off its keypoints: :mod:`kinet_rl.models.object_rollout`).
 Errors are in metres on the table, next to the no-motion baseline (every object stays put).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Protocol
 
 import torch
 from tensordict import TensorDict, TensorDictBase
 from torch import Tensor
 
-from kinet_rl.evaluation.metrics import (
-    keypoint_hit_rate,
-    keypoint_membership,
-    position_error,
-    predict_object_positions,
-)
-from kinet_rl.evaluation.projection import CameraProjection, normalised_to_pixels
-
-
-@dataclass(frozen=True)
-class SceneGeometry:
-    """How images relate to the table: the camera, the image size and the object-centre height."""
-
-    projection: CameraProjection
-    image_size: int
-    object_height: float
-
-    def objects_to_pixels(self, object_pos: Tensor) -> Tensor:
-        """[*B, N, 2] metres -> [*B, N, 2] pixels."""
-        uv = self.projection.objects_to_image(object_pos, self.object_height)
-        return normalised_to_pixels(uv, self.image_size)
-
-
-def model_device(model: torch.nn.Module) -> torch.device:
-    """The device of a model's parameters (CPU for a model without any)."""
-    return next(model.parameters(), torch.empty(0)).device
+from kinet_rl.devices import model_device
+from kinet_rl.envs.geometry import SceneGeometry, normalised_to_pixels
+from kinet_rl.evaluation.metrics import keypoint_hit_rate, position_error
+from kinet_rl.keys import ACTION, OBJECT_POS, PIXELS, PIXELS_0
+from kinet_rl.models.object_rollout import rollout_keypoints
 
 
 @torch.no_grad()
@@ -61,31 +37,12 @@ def keypoint_accuracy(
     """
     generator = torch.Generator().manual_seed(seed)
     batch = dataset.sample(num_frames, generator)
-    pos, _ = model.detector(batch["pixels"].to(model_device(model)))
+    pos, _ = model.detector(batch[PIXELS].to(model_device(model)))
     pos = pos.cpu()
     kp_px = normalised_to_pixels(pos, geometry.image_size)
-    obj_px = geometry.objects_to_pixels(batch["object_pos"])
+    obj_px = geometry.objects_to_pixels(batch[OBJECT_POS])
     in_view = ((obj_px >= 0) & (obj_px <= geometry.image_size - 1)).all(dim=-1)
     return keypoint_hit_rate(kp_px, obj_px, radius_px, counted=in_view)
-
-
-@torch.no_grad()
-def rollout_keypoints(model, pixels: Tensor, actions: Tensor) -> Tensor:
-    """Open-loop keypoint rollout from a first frame.
-
-    Args:
-        pixels: [B, H, W, 3] frames where prediction starts.
-        actions: [B, L, 4] pushes.
-
-    Returns:
-        [B, L + 1, K, 2] keypoints: detected at step 0, predicted after.
-    """
-    pos, feat = model.detector(pixels)
-    trajectory = [pos]
-    for step in range(actions.shape[1]):
-        pos = model.interaction(pos, feat, actions[:, step]).next_pos
-        trajectory.append(pos)
-    return torch.stack(trajectory, dim=1)
 
 
 class ObjectRollout(Protocol):
@@ -99,39 +56,13 @@ class ObjectRollout(Protocol):
     def __call__(self, start: TensorDictBase, actions: Tensor) -> Tensor: ...
 
 
-class KeypointObjectRollout:
-    """KINet's :class:`ObjectRollout`: object motion read off the predicted keypoints.
-
-    Keypoints are related to objects in the start frame (:func:`keypoint_membership`, image
-    space); each object then moves by the mean motion of its keypoints on the table plane.
-    """
-
-    def __init__(self, model, geometry: SceneGeometry) -> None:
-        self.model = model
-        self.geometry = geometry
-
-    @torch.no_grad()
-    def __call__(self, start: TensorDictBase, actions: Tensor) -> Tensor:
-        device = model_device(self.model)
-        kp = rollout_keypoints(self.model, start["pixels"].to(device), actions.to(device)).cpu()
-        object_pos = start["object_pos"]
-        start_px = normalised_to_pixels(kp[:, 0], self.geometry.image_size)
-        weights = keypoint_membership(start_px, self.geometry.objects_to_pixels(object_pos))
-        on_table = self.geometry.projection.to_plane(kp, self.geometry.object_height)
-        steps = [
-            predict_object_positions(object_pos, on_table[:, 0], on_table[:, h], weights)
-            for h in range(1, kp.shape[1])
-        ]
-        return torch.stack(steps, dim=1)
-
-
 def start_frames(seq: TensorDictBase) -> TensorDictBase:
     """The ``[B]`` start-frame TensorDict of a sequence batch (see :class:`ObjectRollout`)."""
     return TensorDict(
         {
-            "pixels": seq["pixels"][:, 0],
-            "pixels_0": seq["pixels_0"],
-            "object_pos": seq["object_pos"][:, 0],
+            PIXELS: seq[PIXELS][:, 0],
+            PIXELS_0: seq[PIXELS_0],
+            OBJECT_POS: seq[OBJECT_POS][:, 0],
         },
         batch_size=seq.batch_size,
     )
@@ -152,8 +83,8 @@ def forward_errors(
     """
     generator = torch.Generator().manual_seed(seed)
     seq = dataset.sample_sequences(num_sequences, max(horizons), generator)
-    pred = rollout(start_frames(seq), seq["action"])  # [B, L, N, 2]
-    truth = seq["object_pos"]
+    pred = rollout(start_frames(seq), seq[ACTION])  # [B, L, N, 2]
+    truth = seq[OBJECT_POS]
     return {
         h: {
             "model": position_error(pred[:, h - 1], truth[:, h]).mean().item(),
@@ -174,10 +105,10 @@ def image_prediction_errors(
     """Mean squared error (pixels in [0, 1]) of ``f_rec(I_0, x_0, x_hat_h)`` against the true frame."""
     generator = torch.Generator().manual_seed(seed)
     seq = dataset.sample_sequences(num_sequences, max(horizons), generator).to(model_device(model))
-    kp = rollout_keypoints(model, seq["pixels"][:, 0], seq["action"])
-    truth = seq["pixels"].float() / 255.0
+    kp = rollout_keypoints(model, seq[PIXELS][:, 0], seq[ACTION])
+    truth = seq[PIXELS].float() / 255.0
     return {
-        h: (model.predict_pixels(seq["pixels_0"], kp[:, h]) - truth[:, h]).pow(2).mean().item()
+        h: (model.predict_pixels(seq[PIXELS_0], kp[:, h]) - truth[:, h]).pow(2).mean().item()
         for h in horizons
     }
 

@@ -9,23 +9,18 @@ from typing import Any
 
 import numpy as np
 import torch
-from omegaconf import DictConfig
 
 from kinet_rl.atomic import atomic_write_text
+from kinet_rl.devices import model_device
+from kinet_rl.envs.geometry import SceneGeometry, normalised_to_pixels
 from kinet_rl.evaluation.forward import (
-    SceneGeometry,
     forward_errors,
     forward_table,
     image_prediction_errors,
     keypoint_accuracy,
-    model_device,
 )
 from kinet_rl.evaluation.images import draw_keypoints, image_grid, save_png, upscale
-from kinet_rl.evaluation.projection import (
-    OBJECT_CENTRE_HEIGHT,
-    camera_projection,
-    normalised_to_pixels,
-)
+from kinet_rl.keys import ACTION, NEXT_PIXELS, PIXELS, PIXELS_0
 
 log = logging.getLogger(__name__)
 
@@ -35,13 +30,20 @@ SUMMARY_FRAMES = 8
 SUMMARY_SCALE = 4
 
 
-def scene_geometry(env_cfg: DictConfig) -> SceneGeometry:
-    """The image <-> table geometry of an experiment's environment."""
-    return SceneGeometry(
-        projection=camera_projection(env_cfg.task, env_cfg.camera),
-        image_size=int(env_cfg.image_size),
-        object_height=OBJECT_CENTRE_HEIGHT[env_cfg.task],
-    )
+@dataclass(frozen=True)
+class ReportSettings:
+    """What the final evaluation of a training run measures (the ``report`` config group).
+
+    Attributes:
+        horizons: Pushes ahead at which forward prediction is scored.
+        num_sequences: Test sequences per forward-prediction score.
+        rearrangement_episodes: Episodes of the short rearrangement evaluation at the end of a
+            KINet run (0: none).
+    """
+
+    horizons: tuple[int, ...] = (1, 5, 10)
+    num_sequences: int = 256
+    rearrangement_episodes: int = 2
 
 
 def hit_radius(image_size: int) -> float:
@@ -62,20 +64,20 @@ def summary_images(model, dataset, geometry: SceneGeometry, seed: int = 0) -> di
     model.eval()
     batch = dataset.sample(SUMMARY_FRAMES, torch.Generator().manual_seed(seed))
     batch = batch.to(model_device(model))
-    source, observed = model.detector.encode(torch.cat([batch["pixels_0"], batch["pixels"]])).split(
+    source, observed = model.detector.encode(torch.cat([batch[PIXELS_0], batch[PIXELS]])).split(
         SUMMARY_FRAMES
     )
     pos = observed.pos
     rebuilt = (model.reconstructor(source, observed) + 0.5).clamp(0.0, 1.0)
-    next_pos = model.interaction(pos, observed.feat, batch["action"]).next_pos
-    predicted = model.predict_pixels(batch["pixels_0"], next_pos)
+    next_pos = model.interaction(pos, observed.feat, batch[ACTION]).next_pos
+    predicted = model.predict_pixels(batch[PIXELS_0], next_pos)
     kp_px = normalised_to_pixels(pos, geometry.image_size)
     batch, kp_px, rebuilt, predicted = batch.cpu(), kp_px.cpu(), rebuilt.cpu(), predicted.cpu()
     overlays = [
         draw_keypoints(frame, kp, SUMMARY_SCALE)
-        for frame, kp in zip(batch["pixels"], kp_px, strict=True)
+        for frame, kp in zip(batch[PIXELS], kp_px, strict=True)
     ]
-    rows = [batch["pixels"], rebuilt, predicted, batch[("next", "pixels")]]
+    rows = [batch[PIXELS], rebuilt, predicted, batch[NEXT_PIXELS]]
     grid = [[upscale(image, SUMMARY_SCALE) for image in row] for row in rows]
     return {"keypoints": image_grid([overlays]), "reconstruction": image_grid(grid)}
 
@@ -111,22 +113,6 @@ class TrainingReport:
     geometry: SceneGeometry
     horizons: tuple[int, ...] = (1, 5, 10)
     num_sequences: int = 256
-
-    @classmethod
-    def for_run(cls, cfg: DictConfig, run_dir: Path, model, val, test) -> TrainingReport:
-        """The report of a composed training config."""
-        geometry = scene_geometry(cfg.env)
-        settings = cfg.report
-        return cls(
-            Path(run_dir),
-            cfg.exp_name,
-            model,
-            val,
-            test,
-            geometry,
-            tuple(settings.horizons),
-            settings.num_sequences,
-        )
 
     @property
     def has_keypoints(self) -> bool:

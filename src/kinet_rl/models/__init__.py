@@ -1,4 +1,5 @@
-"""KINet: keypoint detector and reconstruction, probabilistic graph forward model, losses."""
+"""KINet: keypoint detector and reconstruction, probabilistic graph forward model, losses, and
+its model env and push planner for goal-conditioned control."""
 
 from __future__ import annotations
 
@@ -11,19 +12,38 @@ from kinet_rl.models.interaction import (
 )
 from kinet_rl.models.keypoints import KeypointDetector, KeypointReconstructor
 from kinet_rl.models.losses import KINetLoss, graph_info_nce
+from kinet_rl.models.model_env import (
+    REWARDS,
+    GraphDistanceReward,
+    GraphSimilarityReward,
+    KeypointChamferReward,
+    KINetModelEnv,
+    KINetReward,
+    chamfer_distance,
+)
+from kinet_rl.models.push_planner import Push, PushPlanner
 from kinet_rl.models.transforms import KeypointTransform
 from kinet_rl.models.world_model import KINetWorldModel, TransitionOutputs
 
 __all__ = [
+    "REWARDS",
     "CheckpointError",
+    "GraphDistanceReward",
     "GraphPrediction",
+    "GraphSimilarityReward",
     "KINetLoss",
+    "KINetModelEnv",
+    "KINetReward",
     "KINetWorldModel",
+    "KeypointChamferReward",
     "KeypointDetector",
     "KeypointInteractionNet",
     "KeypointReconstructor",
     "KeypointTransform",
+    "Push",
+    "PushPlanner",
     "TransitionOutputs",
+    "chamfer_distance",
     "edge_geometry",
     "graph_info_nce",
     "graph_similarity",

@@ -1,9 +1,10 @@
 """Checkpointing for models rebuilt from a constructor config: atomic saves, safe loads.
 
 A model that mixes in :class:`ConfigCheckpointMixin` keeps its constructor arguments in
-``self.config`` and names its file format in ``checkpoint_format``; the mixin writes weights and
-config atomically and rebuilds the model from them (``weights_only=True``), refusing files of
-another model or with settings other than the caller expects.
+``self.config`` and names its file format in ``checkpoint_format``; the mixin writes weights,
+config and the scene the model was trained on (typed :class:`~kinet_rl.envs.SceneSettings`)
+atomically and rebuilds the model from them (``weights_only=True``), refusing files of another
+model or with settings other than the caller expects.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from typing import Any, ClassVar, TypeVar
 from torch import nn
 
 from kinet_rl.atomic import CheckpointError, atomic_torch_save, safe_torch_load
+from kinet_rl.envs.settings import SceneSettings
 
 log = logging.getLogger(__name__)
 
@@ -31,15 +33,13 @@ class ConfigCheckpointMixin:
     checkpoint_format: ClassVar[str]
     config: dict[str, Any]
 
-    def save_checkpoint(
-        self, path: str | os.PathLike, config: dict[str, Any] | None = None
-    ) -> None:
-        """Atomically writes weights, the constructor config and optional run ``config`` metadata."""
+    def save_checkpoint(self, path: str | os.PathLike, scene: SceneSettings | None = None) -> None:
+        """Atomically writes weights, the constructor config and the ``scene`` trained on."""
         assert isinstance(self, nn.Module)
         state = {
             "format": self.checkpoint_format,
             "model_config": dict(self.config),
-            "config": dict(config or {}),
+            "scene": None if scene is None else scene.as_dict(),
             "state_dict": self.state_dict(),
         }
         atomic_torch_save(state, path)
@@ -91,3 +91,10 @@ class ConfigCheckpointMixin:
                 "the file was edited or written by an incompatible version, re-save it."
             ) from err
         return model
+
+
+def checkpoint_scene(path: str | os.PathLike) -> SceneSettings | None:
+    """The scene a checkpoint's model was trained on (None when the file does not say)."""
+    state = safe_torch_load(path, ("format",), "save_checkpoint")
+    scene = state.get("scene")
+    return None if scene is None else SceneSettings.from_mapping(scene)

@@ -13,11 +13,12 @@ import torch
 from tensordict import TensorDictBase
 from torch import Tensor, nn
 
-from kinet_rl.evaluation.forward import KeypointObjectRollout, SceneGeometry
-from kinet_rl.keys import ACTION, KP_FEAT, KP_NODE_EMB, KP_POS, PIXELS, PIXELS_0
+from kinet_rl.envs.geometry import SceneGeometry
+from kinet_rl.keys import ACTION, KP_FEAT, KP_NODE_EMB, KP_POS, NEXT_PIXELS, PIXELS, PIXELS_0
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.models.interaction import GraphPrediction, KeypointInteractionNet
 from kinet_rl.models.keypoints import KeypointDetector, KeypointReconstructor, pixels_to_input
+from kinet_rl.models.object_rollout import KeypointObjectRollout
 
 log = logging.getLogger(__name__)
 
@@ -130,7 +131,7 @@ class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
             tensordict: ``[B]`` batch with ``PIXELS_0``, ``PIXELS``, ``ACTION`` and
                 ``("next", PIXELS)``; images ``[B, H, W, 3]`` uint8 or float in ``[0, 1]``.
         """
-        needed = (PIXELS_0, PIXELS, ("next", PIXELS), ACTION)
+        needed = (PIXELS_0, PIXELS, NEXT_PIXELS, ACTION)
         missing = [key for key in needed if tensordict.get(key, None) is None]
         if missing:
             raise KeyError(

@@ -16,9 +16,11 @@ from typing import Any
 import torch
 
 from kinet_rl.atomic import atomic_save_with
-from kinet_rl.control.report import LABELS as CONTROL_LABELS
 from kinet_rl.evaluation.forward import ObjectRollout, start_frames
 from kinet_rl.evaluation.metrics import position_error
+from kinet_rl.keys import ACTION, OBJECT_POS
+from kinet_rl.rearrangement.methods import METHODS
+from kinet_rl.rearrangement.settings import generalization_key
 
 #: Row labels of the tables.
 LABELS = {
@@ -29,8 +31,8 @@ LABELS = {
     "forwinv": "ForwInv",
     "in": "IN (GT state)",
     "visin": "VisIN (GT state + image)",
-    "random": CONTROL_LABELS["random"],
-    "oracle": CONTROL_LABELS["oracle"],
+    "random": METHODS["random"].label,
+    "oracle": METHODS["oracle"].label,
 }
 
 
@@ -44,8 +46,8 @@ def single_step_errors(
     sequence's error is the mean over its objects.
     """
     seq = dataset.sample_sequences(num_sequences, 1, torch.Generator().manual_seed(seed))
-    pred = rollout(start_frames(seq), seq["action"])[:, 0]  # [B, N, 2]
-    truth = seq["object_pos"]
+    pred = rollout(start_frames(seq), seq[ACTION])[:, 0]  # [B, N, 2]
+    truth = seq[OBJECT_POS]
     errors = {
         "model": position_error(pred, truth[:, 1]),
         "no_motion": position_error(truth[:, 0], truth[:, 1]),
@@ -112,7 +114,7 @@ def mpc_table(
 
 def _planner(row: str, kinet_method: str) -> str:
     if row.startswith("kinet"):
-        return CONTROL_LABELS[kinet_method]
+        return METHODS[kinet_method].label
     if row in ("forw", "forwinv"):
         return "MPC on goal-image feature distance"
     if row in ("in", "visin", "oracle"):
@@ -141,9 +143,13 @@ def table_ii(
         "|---:|" + "---:|" * (len(geometries) + len(columns)),
     ]
     for n in num_objects:
-        starts = [_initial_distance(cells, models, f"n{n}_geom_{g}") for g in geometries]
+        starts = [_initial_distance(cells, models, generalization_key(n, g)) for g in geometries]
         finals = [
-            _mm(cells.get(m, {}).get(f"n{n}_geom_{g}"), "final_distance", "final_distance_sem")
+            _mm(
+                cells.get(m, {}).get(generalization_key(n, g)),
+                "final_distance",
+                "final_distance_sem",
+            )
             for m, g in columns
         ]
         lines.append(f"| {n} | " + " | ".join(starts + finals) + " |")

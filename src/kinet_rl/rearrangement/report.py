@@ -3,33 +3,22 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import torch
 
 from kinet_rl.atomic import atomic_save_with, atomic_write, atomic_write_json, atomic_write_text
+from kinet_rl.envs.geometry import normalised_to_pixels
 from kinet_rl.evaluation.images import draw_keypoints, image_grid, upscale
-from kinet_rl.evaluation.projection import normalised_to_pixels
+from kinet_rl.rearrangement.results import EpisodeResult, RearrangementResults
 
-if TYPE_CHECKING:
-    from kinet_rl.control.evaluation import RearrangementSettings
-    from kinet_rl.control.rearrange import EpisodeResult
-
-LABELS = {
-    "kinet_graph": "KINet-GraphMPC (paper S)",
-    "kinet_graph_distance": "KINet-GraphMPC (embedding distance)",
-    "kinet_keypoints": "MPC on keypoint positions",
-    "random": "Random pushes",
-    "oracle": "Oracle MPC (GT state, analytic push model)",
-    "model_mpc": "Baseline model MPC (distance to goal)",
-}
 VIDEO_SCALE = 4
 
-Summary = dict[str, dict[str, dict[str, Any]]]
 
-
-def plot_curves(by_method: dict[str, dict[str, Any]], path: Path, title: str) -> Path:
+def plot_curves(
+    by_method: dict[str, dict[str, Any]], labels: dict[str, str], path: Path, title: str
+) -> Path:
     """Mean distance to goal (mm) over pushes with a standard-error band, one line per method."""
     import matplotlib
 
@@ -41,7 +30,7 @@ def plot_curves(by_method: dict[str, dict[str, Any]], path: Path, title: str) ->
         mean = np.asarray(stats["mean_curve"]) * 1e3
         sem = np.asarray(stats["sem_curve"]) * 1e3
         steps = np.arange(len(mean))
-        ax.plot(steps, mean, label=f"{LABELS.get(method, method)} (n={stats['episodes']})")
+        ax.plot(steps, mean, label=f"{labels.get(method, method)} (n={stats['episodes']})")
         ax.fill_between(steps, mean - sem, mean + sem, alpha=0.2)
     ax.set_xlabel("push t")
     ax.set_ylabel("mean object distance to goal [mm]")
@@ -54,10 +43,10 @@ def plot_curves(by_method: dict[str, dict[str, Any]], path: Path, title: str) ->
     return path
 
 
-def markdown(settings: RearrangementSettings, summary: Summary, plot_name: str) -> str:
+def markdown(results: RearrangementResults, plot_name: str) -> str:
     """The markdown section: settings, comparison table, Table II layout and backgrounds."""
+    settings, labels = results.settings, results.labels
     task, scene = settings.task, settings.scene
-    kinet = LABELS[settings.kinet_method]
     lines = [
         "## Rearrangement (GraphMPC)",
         "",
@@ -73,15 +62,20 @@ def markdown(settings: RearrangementSettings, summary: Summary, plot_name: str) 
         "| method | episodes | start [mm] | final [mm] | success |",
         "|---|---|---|---|---|",
     ]
-    for method, stats in summary.get("comparison", {}).items():
-        lines.append(
-            f"| {LABELS.get(method, method)} | {stats['episodes']} | "
-            f"{stats['initial_distance'] * 1e3:.1f} | {_final(stats)} | "
-            f"{stats['success_rate'] * 100:.0f}% |"
-        )
-    cells = {name: stats for name, stats in summary.items() if name.startswith("n")}
+    for condition in results.conditions("comparison"):
+        for method, stats in results.stats(condition).items():
+            lines.append(
+                f"| {labels.get(method, method)} | {stats['episodes']} | "
+                f"{stats['initial_distance'] * 1e3:.1f} | {_final(stats)} | "
+                f"{stats['success_rate'] * 100:.0f}% |"
+            )
+    kinet = labels.get(settings.kinet_method, settings.kinet_method)
+    cells = {
+        (c.scene.num_objects, c.scene.geometry): results.stats(c).get(settings.kinet_method)
+        for c in results.conditions("generalization")
+    }
     if cells:
-        geometries = [g for g in settings.geometries if any(k.endswith(f"geom_{g}") for k in cells)]
+        geometries = [g for g in settings.geometries if any(key[1] == g for key in cells)]
         lines += [
             "",
             f"Generalization ({kinet} distance at T, mm, start in brackets; paper Table II layout):",
@@ -90,24 +84,22 @@ def markdown(settings: RearrangementSettings, summary: Summary, plot_name: str) 
             "|---|" + "---|" * len(geometries),
         ]
         for n in settings.num_objects:
-            row = [
-                _final(cells.get(f"n{n}_geom_{g}", {}).get(settings.kinet_method), with_start=True)
-                for g in geometries
-            ]
+            row = [_final(cells.get((n, g)), with_start=True) for g in geometries]
             lines.append(f"| {n} | " + " | ".join(row) + " |")
-    backgrounds = {k: v for k, v in summary.items() if k.startswith("background_")}
+    backgrounds = results.conditions("background")
     if backgrounds:
         lines += [
             "",
             "Backgrounds (final distance at T, mm):",
             "",
-            f"| background | {kinet} | Random pushes |",
+            f"| background | {kinet} | {labels.get('random', 'random')} |",
             "|---|---|---|",
         ]
-        for name, by_method in backgrounds.items():
+        for condition in backgrounds:
+            stats = results.stats(condition)
             lines.append(
-                f"| {name.removeprefix('background_')} | {_final(by_method.get(settings.kinet_method))} | "
-                f"{_final(by_method.get('random'))} |"
+                f"| {condition.scene.background} | {_final(stats.get(settings.kinet_method))} | "
+                f"{_final(stats.get('random'))} |"
             )
     return "\n".join(lines) + "\n"
 
@@ -153,30 +145,29 @@ def write_video(result: EpisodeResult, path: Path, fps: float = 4.0) -> Path:
     return path
 
 
-def write_report(
-    out_dir: Path,
-    settings: RearrangementSettings,
-    summary: Summary,
-    results: dict[str, dict[str, list[EpisodeResult]]],
-) -> list[Path]:
+def write_report(out_dir: Path, results: RearrangementResults) -> list[Path]:
     """Writes ``rearrangement.png``, ``rearrangement.md``, ``rearrangement.json`` and videos."""
     out_dir.mkdir(parents=True, exist_ok=True)
+    settings = results.settings
     files = [
         plot_curves(
-            summary["comparison"],
+            results.stats(condition),
+            results.labels,
             out_dir / "rearrangement.png",
             f"Rearrangement, {settings.scene.num_objects} objects",
         )
+        for condition in results.conditions("comparison")
     ]
-    for name, by_method in summary.items():
-        if name.startswith("background_"):
-            files.append(plot_curves(by_method, out_dir / f"rearrangement_{name}.png", name))
-    for result in results.get("comparison", {}).get(settings.kinet_method, []):
-        if result.frames:
-            files.append(write_video(result, out_dir / f"rearrangement_seed{result.seed}.gif"))
-    text = markdown(settings, summary, "rearrangement.png")
-    atomic_write_text(out_dir / "rearrangement.md", text)
+    for condition in results.conditions("background"):
+        path = out_dir / f"rearrangement_{condition.name}.png"
+        files.append(plot_curves(results.stats(condition), results.labels, path, condition.name))
+    for condition in results.conditions("comparison"):
+        for result in results.episodes[condition].get(settings.kinet_method, []):
+            if result.frames:
+                files.append(write_video(result, out_dir / f"rearrangement_seed{result.seed}.gif"))
+    atomic_write_text(out_dir / "rearrangement.md", markdown(results, "rearrangement.png"))
     atomic_write_json(
-        out_dir / "rearrangement.json", {"summary": summary, "settings": settings.as_dict()}
+        out_dir / "rearrangement.json",
+        {"summary": results.summary(), "settings": settings.as_dict()},
     )
     return [*files, out_dir / "rearrangement.md", out_dir / "rearrangement.json"]

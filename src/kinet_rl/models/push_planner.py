@@ -10,10 +10,10 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from kinet_rl.control.model_env import KINetModelEnv
 from kinet_rl.keys import ACTION, GOAL_KP_POS, KP_POS
-from kinet_rl.models import KINetWorldModel
-from kinet_rl.planners import GraphMPCPlanner
+from kinet_rl.models.model_env import GraphDistanceReward, KINetModelEnv, KINetReward
+from kinet_rl.models.world_model import KINetWorldModel
+from kinet_rl.planners.graph_mpc import GraphMPCPlanner
 
 logger = logging.getLogger(__name__)
 
@@ -72,9 +72,8 @@ class PushPlanner:
     Args:
         model: A trained KINet world model.
         workspace_half_size: Half the side of the square workspace, metres (0.20 blocks, 0.30 YCB).
-        reward: ``"graph_distance"`` (default; GraphMPC on the node-embedding distance),
-            ``"graph"`` (the paper's ``S``) or ``"keypoints"`` (MPC on keypoint positions only);
-            see :class:`KINetModelEnv`.
+        reward: The planning objective (default :class:`GraphDistanceReward`, GraphMPC on the
+            node-embedding distance); see :class:`KINetModelEnv`.
         seed: Seeds the planner's sampling for reproducible pushes (None: global torch RNG).
         **planner_kwargs: :class:`GraphMPCPlanner` settings (``planning_horizon``, ...).
     """
@@ -83,14 +82,14 @@ class PushPlanner:
         self,
         model: KINetWorldModel,
         workspace_half_size: float,
-        reward: str = "graph_distance",
+        reward: KINetReward | None = None,
         seed: int | None = None,
         **planner_kwargs: Any,
     ) -> None:
         if not workspace_half_size > 0:
             raise ValueError(f"workspace_half_size must be > 0 metres, got {workspace_half_size}.")
         model.eval()
-        self.env = KINetModelEnv(model, reward=reward)
+        self.env = KINetModelEnv(model, GraphDistanceReward() if reward is None else reward)
         generator = None if seed is None else torch.Generator(self.env.device).manual_seed(seed)
         self.planner = GraphMPCPlanner(self.env, generator=generator, **planner_kwargs)
         self.workspace_half_size = float(workspace_half_size)

@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import torch
-from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModule
 from torch import Tensor, nn
-from torchrl.data import Bounded, Composite, Unbounded
-from torchrl.envs.model_based import ModelBasedEnvBase
 
-from kinet_rl.keys import ACTION, GOAL_OBJECT_POS, OBJECT_POS
+from kinet_rl.keys import ACTION, GOAL_OBJECT_POS, OBJECT_POS, STEP_REWARD
+from kinet_rl.planners.model_env import StateModelEnv
 
 
 def analytic_push(
@@ -58,7 +56,7 @@ class _AnalyticStep(nn.Module):
         return nxt, reward, goal
 
 
-class AnalyticPushModelEnv(ModelBasedEnvBase):
+class AnalyticPushModelEnv(StateModelEnv):
     """A model env on ground-truth object positions with :func:`analytic_push` dynamics.
 
     Used for the oracle baseline: it plans with the true object state and a hand-written push
@@ -80,21 +78,10 @@ class AnalyticPushModelEnv(ModelBasedEnvBase):
         step = TensorDictModule(
             _AnalyticStep(half_size, contact_radius),
             in_keys=[OBJECT_POS, ACTION, GOAL_OBJECT_POS],
-            out_keys=[OBJECT_POS, "reward", GOAL_OBJECT_POS],
+            out_keys=[OBJECT_POS, STEP_REWARD, GOAL_OBJECT_POS],
         )
-        super().__init__(step, batch_size=torch.Size([]))
-        state = Composite(
-            {OBJECT_POS: Unbounded((num_objects, 2)), GOAL_OBJECT_POS: Unbounded((num_objects, 2))}
+        super().__init__(
+            step,
+            {OBJECT_POS: (num_objects, 2), GOAL_OBJECT_POS: (num_objects, 2)},
+            reset_hint="pass the start and goal object positions, metres.",
         )
-        self.observation_spec = state.clone()
-        self.state_spec = state
-        self.action_spec = Bounded(-1.0, 1.0, (4,))
-        self.reward_spec = Unbounded((1,))
-
-    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
-        if tensordict is None or OBJECT_POS not in tensordict.keys():  # noqa: SIM118 (TensorDict)
-            raise KeyError(
-                f"AnalyticPushModelEnv.reset needs a tensordict with {OBJECT_POS!r} and "
-                f"{GOAL_OBJECT_POS!r} (the start and goal object positions, metres)."
-            )
-        return tensordict.select(OBJECT_POS, GOAL_OBJECT_POS).clone()

@@ -1,4 +1,4 @@
-"""Pinhole projection between the table and a scene camera's normalised image coordinates.
+"""Camera geometry: pinhole projection between the table and a camera's normalised image coordinates.
 
 Image coordinates follow the keypoint convention of :mod:`kinet_rl.models.keypoints`: ``(x, y)``
 in ``[-1, 1]``, x right, y down, ``-1``/``1`` at the image borders (``align_corners=False``).
@@ -16,6 +16,7 @@ import torch
 from torch import Tensor
 
 from kinet_rl.envs.blocks import BLOCK_HALF_HEIGHT
+from kinet_rl.envs.factory import make_dm_env
 
 #: Height (metres above the table top) at which object centres are taken to lie.
 OBJECT_CENTRE_HEIGHT = {"blocks": BLOCK_HALF_HEIGHT, "ycb": 0.04}
@@ -70,8 +71,6 @@ class CameraProjection:
 
 def camera_projection(task: str, camera: str) -> CameraProjection:
     """The projection of a task's camera (builds the scene once to read it)."""
-    from kinet_rl.envs import make_dm_env
-
     env = make_dm_env(task=task, num_objects=1, camera=camera, image_size=16)
     try:
         env.physics.forward()
@@ -83,3 +82,22 @@ def camera_projection(task: str, camera: str) -> CameraProjection:
 def normalised_to_pixels(uv: Tensor, image_size: int) -> Tensor:
     """Normalised image coordinates -> pixel coordinates (pixel centres at integers)."""
     return (uv + 1.0) * (image_size / 2.0) - 0.5
+
+
+@dataclass(frozen=True)
+class SceneGeometry:
+    """How images relate to the table: the camera, the image size and the object-centre height."""
+
+    projection: CameraProjection
+    image_size: int
+    object_height: float
+
+    @classmethod
+    def of_scene(cls, task: str, camera: str, image_size: int) -> SceneGeometry:
+        """The geometry of a task's camera at ``image_size`` pixels (builds the scene once)."""
+        return cls(camera_projection(task, camera), int(image_size), OBJECT_CENTRE_HEIGHT[task])
+
+    def objects_to_pixels(self, object_pos: Tensor) -> Tensor:
+        """[*B, N, 2] metres -> [*B, N, 2] pixels."""
+        uv = self.projection.objects_to_image(object_pos, self.object_height)
+        return normalised_to_pixels(uv, self.image_size)

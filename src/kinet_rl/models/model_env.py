@@ -1,0 +1,198 @@
+"""KINet as a TorchRL model env: imagined pushes on the keypoint scene graph, scored against a goal.
+
+Reference: KINet, Rezazadeh et al., RA-L 2023, Sec. 3.4 (GraphMPC).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModule
+from torch import Tensor, nn
+
+from kinet_rl.keys import (
+    ACTION,
+    GOAL_KP_NODE_EMB,
+    GOAL_KP_POS,
+    GOAL_PIXELS,
+    KP_FEAT,
+    KP_POS,
+    PIXELS,
+    STEP_REWARD,
+)
+from kinet_rl.models.interaction import GraphPrediction, KeypointInteractionNet, graph_similarity
+from kinet_rl.models.world_model import KINetWorldModel
+from kinet_rl.planners.model_env import StateModelEnv
+
+
+def chamfer_distance(pos: Tensor, goal_pos: Tensor) -> Tensor:
+    """Symmetric Chamfer distance ``[*B]`` between point sets ``[*B, K, 2]`` and ``[*B, M, 2]``.
+
+    The mean over points of the distance to the nearest point of the other set, averaged over
+    both directions; it needs no correspondence between the sets.
+    """
+    dist = torch.cdist(pos, goal_pos.expand(*pos.shape[:-2], *goal_pos.shape[-2:]))  # [*B, K, M]
+    return 0.5 * (dist.min(-1).values.mean(-1) + dist.min(-2).values.mean(-1))
+
+
+class KINetReward(Protocol):
+    """A goal reward of :class:`KINetModelEnv`, computed from one imagined push.
+
+    Called with the interaction net, its prediction for the push, the carried keypoint features
+    ``[*B, K, D]``, the goal graph's node embeddings ``[*B, K, E]`` and the goal keypoints
+    ``[*B, K, 2]``; returns ``[*B]`` (larger is closer to the goal).
+    """
+
+    def __call__(
+        self,
+        interaction: KeypointInteractionNet,
+        prediction: GraphPrediction,
+        feat: Tensor,
+        goal_nodes: Tensor,
+        goal_pos: Tensor,
+    ) -> Tensor: ...
+
+
+class GraphSimilarityReward:
+    """GraphMPC's objective ``S(G_pred, G_goal) / K`` (paper Sec. 3.4).
+
+    ``S`` sums the dot products of matching node embeddings (keypoint ``k`` of the prediction
+    against keypoint ``k`` of the goal image: the detector's keypoint channels are consistent
+    across images). The prediction's embeddings are the interaction net's predicted next nodes,
+    the goal's are ``embed_nodes`` of the goal keypoints: the pair the contrastive loss aligns.
+    Dividing by ``K`` only rescales (it matters for MPPI's temperature, not for CEM).
+    """
+
+    def __call__(self, interaction, prediction, feat, goal_nodes, goal_pos) -> Tensor:
+        return graph_similarity(prediction.next_nodes, goal_nodes) / goal_nodes.shape[-2]
+
+
+class GraphDistanceReward:
+    """Minus the mean squared distance between predicted and goal node embeddings.
+
+    ``-(1/K) sum_k |n_hat_k - n_goal_k|^2`` with ``n_hat`` the ``embed_nodes`` of the predicted
+    keypoints and the carried features. Not in the paper: ``S`` alone rewards embeddings that
+    grow along the goal's, a distance only a match; in docs/results.md it plans better than
+    :class:`GraphSimilarityReward` and :class:`KeypointChamferReward`.
+    """
+
+    def __call__(self, interaction, prediction, feat, goal_nodes, goal_pos) -> Tensor:
+        nodes = interaction.embed_nodes(prediction.next_pos, feat)
+        return -(nodes - goal_nodes).pow(2).sum(-1).mean(-1)
+
+
+class KeypointChamferReward:
+    """MPC on keypoint positions only: minus the symmetric Chamfer distance to the goal keypoints.
+
+    In image units (``[-1, 1]``); no graph embedding is used.
+    """
+
+    def __call__(self, interaction, prediction, feat, goal_nodes, goal_pos) -> Tensor:
+        return -chamfer_distance(prediction.next_pos, goal_pos)
+
+
+#: The rewards by their command-line names (``python -m kinet_rl.plan --reward``).
+REWARDS: dict[str, type[KINetReward]] = {
+    "graph": GraphSimilarityReward,
+    "graph_distance": GraphDistanceReward,
+    "keypoints": KeypointChamferReward,
+}
+
+
+class _GraphStep(nn.Module):
+    """One imagined push with the interaction net; reward from the predicted next graph."""
+
+    def __init__(self, interaction: KeypointInteractionNet, reward: KINetReward) -> None:
+        super().__init__()
+        self.interaction = interaction
+        self.reward = reward
+
+    def forward(
+        self, pos: Tensor, feat: Tensor, action: Tensor, goal_nodes: Tensor, goal_pos: Tensor
+    ) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
+        prediction = self.interaction(pos, feat, action)
+        reward = self.reward(self.interaction, prediction, feat, goal_nodes, goal_pos)
+        return prediction.next_pos, feat, reward.unsqueeze(-1), goal_nodes, goal_pos
+
+
+class KINetModelEnv(StateModelEnv):
+    """Imagined pushing with a trained KINet; state = keypoint scene graph, action = 4-d push.
+
+    Each step predicts the next keypoints with the interaction net (features carried over, as
+    in training) and writes a goal reward computed from the predicted next graph by a
+    :class:`KINetReward`: :class:`GraphSimilarityReward` (the paper's ``S``),
+    :class:`GraphDistanceReward` (node-embedding distance) or :class:`KeypointChamferReward`.
+
+    The goal travels in the tensordict (``GOAL_KP_NODE_EMB``, ``GOAL_KP_POS``), so every batch
+    element can have its own. The env is not batch-locked and runs the model without gradient
+    in eval mode (mean edge logits) when used by a planner.
+
+    Keys:
+        State/observation: ``KP_POS`` ``[*B, K, 2]``, ``KP_FEAT`` ``[*B, K, D]``,
+        ``GOAL_KP_NODE_EMB`` ``[*B, K, E]``, ``GOAL_KP_POS`` ``[*B, K, 2]``. Action ``[*B, 4]``
+        in ``[-1, 1]``. Reward ``[*B, 1]``.
+
+    Args:
+        model: A trained :class:`KINetWorldModel`.
+        reward: The goal reward (default: the paper's ``S``).
+    """
+
+    def __init__(self, model: KINetWorldModel, reward: KINetReward | None = None) -> None:
+        self.reward = GraphSimilarityReward() if reward is None else reward
+        step = TensorDictModule(
+            _GraphStep(model.interaction, self.reward),
+            in_keys=[KP_POS, KP_FEAT, ACTION, GOAL_KP_NODE_EMB, GOAL_KP_POS],
+            out_keys=[KP_POS, KP_FEAT, STEP_REWARD, GOAL_KP_NODE_EMB, GOAL_KP_POS],
+        )
+        cfg = model.config
+        k, d, e = cfg["num_keypoints"], cfg["feat_dim"], cfg["embed_dim"]
+        super().__init__(
+            step,
+            {KP_POS: (k, 2), KP_FEAT: (k, d), GOAL_KP_NODE_EMB: (k, e), GOAL_KP_POS: (k, 2)},
+            reset_hint="env.observe(pixels, goal_pixels) builds it, or pass 'pixels' and "
+            "('goal', 'pixels').",
+        )
+        self.model = model
+
+    @torch.no_grad()
+    def observe(self, pixels: Tensor, goal_pixels: Tensor) -> TensorDict:
+        """The start state for a planner: keypoints of ``pixels`` and the goal graph of ``goal_pixels``.
+
+        Args:
+            pixels: uint8 ``[*B, H, W, 3]`` current images.
+            goal_pixels: uint8 ``[*B, H, W, 3]`` goal images (or one ``[H, W, 3]`` for all).
+
+        Returns:
+            A ``[*B]`` tensordict with the state keys.
+        """
+        pixels = pixels.to(self.device)
+        goal_pixels = goal_pixels.to(self.device)
+        if pixels.dim() < 3 or pixels.shape[-1] != 3:
+            raise ValueError(f"pixels must be [*B, H, W, 3] images, got {tuple(pixels.shape)}.")
+        if goal_pixels.shape[-3:] != pixels.shape[-3:]:
+            raise ValueError(
+                f"goal image {tuple(goal_pixels.shape[-3:])} and current image "
+                f"{tuple(pixels.shape[-3:])} must have the same [H, W, 3]; resize the goal image."
+            )
+        batch = pixels.shape[:-3]
+        goal_pixels = goal_pixels.expand(*batch, *goal_pixels.shape[-3:])
+        was_training = self.model.training
+        self.model.eval()
+        pos, feat = self.model.detector(pixels)
+        goal_pos, goal_feat = self.model.detector(goal_pixels)
+        goal_nodes = self.model.interaction.embed_nodes(goal_pos, goal_feat)
+        self.model.train(was_training)
+        return TensorDict(
+            {KP_POS: pos, KP_FEAT: feat, GOAL_KP_NODE_EMB: goal_nodes, GOAL_KP_POS: goal_pos},
+            batch_size=batch,
+            device=self.device,
+        )
+
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
+        if tensordict is not None and KP_POS not in tensordict.keys(True):
+            pixels, goal = tensordict.get(PIXELS, None), tensordict.get(GOAL_PIXELS, None)
+            if pixels is not None and goal is not None:
+                return self.observe(pixels, goal)
+        return super()._reset(tensordict, **kwargs)

@@ -1,0 +1,243 @@
+"""The experiment pipeline as library functions: collect, train, evaluate, report.
+
+``python -m kinet_rl.train`` and ``python -m kinet_rl.tables`` both run :func:`run_experiment`;
+they turn their Hydra configs into an :class:`ExperimentSettings` (plain, typed data) and model
+and loss factories, so nothing here sees a config object.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+
+from kinet_rl.atomic import atomic_write_json
+from kinet_rl.data import collect_dataset, load_dataset
+from kinet_rl.envs import make_env
+from kinet_rl.envs.geometry import SceneGeometry
+from kinet_rl.envs.settings import SceneSettings
+from kinet_rl.evaluation.report import ReportSettings, TrainingReport
+from kinet_rl.models.world_model import KINetWorldModel
+from kinet_rl.rearrangement.methods import check_methods
+from kinet_rl.rearrangement.report import write_report
+from kinet_rl.rearrangement.runner import run_rearrangement
+from kinet_rl.rearrangement.settings import RearrangementSettings
+from kinet_rl.training.checkpoint import TrainingCheckpoint
+from kinet_rl.training.distributed import init_distributed
+from kinet_rl.training.loggers import make_logger
+from kinet_rl.training.loop import Trainer, TrainerSettings
+
+log = logging.getLogger(__name__)
+
+#: Env settings a dataset must match to train a model of the experiment.
+DATASET_ENV_KEYS = ("task", "camera", "image_size", "num_objects")
+#: File name of a trained model in its run directory.
+KINET_FILE, BASELINE_FILE = "kinet.pt", "model.pt"
+
+
+@dataclass(frozen=True)
+class ExperimentSettings:
+    """Everything one experiment runs with, as plain data.
+
+    Attributes:
+        name: Experiment name (report title, logger run name).
+        seed: Seed of model initialisation (each process adds its rank).
+        device: ``"auto"``, ``"cpu"`` or ``"cuda"``.
+        env: Arguments of :func:`kinet_rl.envs.make_env` (the ``env`` group, no ``_target_``).
+        data: Arguments of :func:`kinet_rl.data.collect_dataset` plus ``generalization``
+            (extra datasets: name -> ``num_episodes``, ``env`` overrides, optional ``seed``).
+        trainer: Training settings.
+        report: Final-evaluation settings.
+        rearrangement: Settings of the rearrangement evaluation.
+        logger: TorchRL logger kind (``csv``, ``tensorboard``, ``wandb``).
+        wandb_kwargs: Extra arguments of the W&B logger.
+        model_config: The model's config, part of the run identity that resuming checks.
+        loss_config: The loss's config, likewise.
+    """
+
+    name: str
+    seed: int
+    device: str
+    env: Mapping[str, Any]
+    data: Mapping[str, Any]
+    trainer: TrainerSettings
+    report: ReportSettings
+    rearrangement: RearrangementSettings
+    logger: str = "csv"
+    wandb_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    model_config: Mapping[str, Any] = field(default_factory=dict)
+    loss_config: Mapping[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_container(cls, cfg: Mapping[str, Any]) -> ExperimentSettings:
+        """Settings from a resolved plain-container config (``conf/config.yaml``'s layout)."""
+        env = {k: v for k, v in cfg["env"].items() if k != "_target_"}
+        report = dict(cfg["report"])
+        report["horizons"] = tuple(report.get("horizons", ReportSettings.horizons))
+        return cls(
+            name=cfg["exp_name"],
+            seed=int(cfg["seed"]),
+            device=cfg["device"],
+            env=env,
+            data=dict(cfg["data"]),
+            trainer=TrainerSettings(**cfg["trainer"]),
+            report=ReportSettings(**report),
+            rearrangement=RearrangementSettings.from_dicts(cfg.get("eval") or {}, env),
+            logger=cfg["logger"]["kind"],
+            wandb_kwargs=dict(cfg["logger"].get("wandb_kwargs") or {}),
+            model_config=dict(cfg["model"]),
+            loss_config=dict(cfg["loss"]),
+        )
+
+    @property
+    def scene(self) -> SceneSettings:
+        """The experiment's scene."""
+        return SceneSettings.from_mapping(self.env)
+
+    @property
+    def dataset_path(self) -> Path:
+        """Folder of the experiment's main dataset."""
+        return dataset_path(self.data)
+
+    def identity(self) -> dict[str, Any]:
+        """The settings a checkpoint must share with the run that resumes it."""
+        return {
+            "model": dict(self.model_config),
+            "loss": dict(self.loss_config),
+            "dataset": str(self.dataset_path),
+            "batch_size": self.trainer.batch_size,
+        }
+
+
+def dataset_path(data: Mapping[str, Any]) -> Path:
+    """Folder of the main dataset of a ``data`` group: ``<root>/<name>``."""
+    return Path(data["root"]) / data["name"]
+
+
+def collect_datasets(env: Mapping[str, Any], data: Mapping[str, Any]) -> list[Path]:
+    """Collects the main dataset of ``data`` and then each of its generalization sets.
+
+    Generalization set ``i`` (1-based, in order) uses seed ``data.seed + i`` unless it sets its
+    own; its ``env`` entry overrides the env settings. Complete datasets are skipped, partial ones
+    resumed.
+    """
+    main = dict(data)
+    generalization = main.pop("generalization", None) or {}
+    jobs: list[tuple[dict[str, Any], dict[str, Any]]] = [(main, {})]
+    for offset, (name, extra) in enumerate(generalization.items(), start=1):
+        extra = dict(extra)
+        env_overrides = extra.pop("env", None) or {}
+        jobs.append(({**main, "seed": main["seed"] + offset, **extra, "name": name}, env_overrides))
+    paths = []
+    for job, env_overrides in jobs:
+        env_config = {**env, **env_overrides}
+        env_fn = functools.partial(make_env, **env_config)
+        paths.append(collect_dataset(env_fn=env_fn, env_config=env_config, **job))
+    return paths
+
+
+def evaluate_rearrangement(
+    model: nn.Module | None,
+    settings: RearrangementSettings,
+    out_dir: str | Path,
+    generalization: bool = False,
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Runs the rearrangement evaluation and writes its report (plot, markdown, JSON, GIFs).
+
+    Returns:
+        ``{"summary": {condition: {method: stats}}, "settings": ..., "files": [...]}``; the
+        comparison's stats include ``final_distance`` (metres) and ``success_rate``.
+    """
+    results = run_rearrangement(model, settings, generalization, progress)
+    files = write_report(Path(out_dir), results)
+    log.info("Rearrangement evaluation written to %s", out_dir)
+    return {
+        "summary": results.summary(),
+        "settings": settings.as_dict(),
+        "files": [str(f) for f in files],
+    }
+
+
+def model_file(model: nn.Module) -> str:
+    """The file name of a trained model in its run directory."""
+    return KINET_FILE if isinstance(model, KINetWorldModel) else BASELINE_FILE
+
+
+def run_experiment(
+    settings: ExperimentSettings,
+    build_model: Callable[[], nn.Module],
+    build_loss: Callable[[nn.Module], nn.Module],
+    run_dir: str | Path,
+) -> dict[str, Any]:
+    """Collects the data (if missing), trains (resuming), evaluates and writes the run's report.
+
+    Args:
+        settings: The experiment.
+        build_model: Builds the untrained model (called after seeding).
+        build_loss: Builds the loss module of a model.
+        run_dir: The run directory; re-running with the same settings resumes there.
+
+    Returns:
+        The numbers of ``results.json`` (empty on non-main processes).
+    """
+    run_dir = Path(run_dir)
+    check_methods(settings.rearrangement)
+    ctx = init_distributed(settings.device)
+    torch.manual_seed(settings.seed + ctx.rank)
+    if ctx.is_main:
+        collect_datasets(settings.env, settings.data)
+    if ctx.world_size > 1:
+        torch.distributed.barrier()
+    expect = {k: settings.env[k] for k in DATASET_ENV_KEYS}
+    data = {
+        split: load_dataset(settings.dataset_path, split, expect)
+        for split in ("train", "val", "test")
+    }
+    model = build_model()
+    loss = build_loss(model)
+    scene = settings.scene
+    geometry = SceneGeometry.of_scene(scene.task, scene.camera, scene.image_size)
+    report = TrainingReport(
+        run_dir,
+        settings.name,
+        model,
+        data["val"],
+        data["test"],
+        geometry,
+        settings.report.horizons,
+        settings.report.num_sequences,
+    )
+    trainer = Trainer(
+        loss,
+        data["train"],
+        data["val"],
+        settings.trainer,
+        TrainingCheckpoint(run_dir, settings.identity()),
+        make_logger(settings.logger, run_dir, settings.name, None, settings.wandb_kwargs),
+        ctx,
+        on_validate=report.on_validate,
+    )
+    if trainer.resume():
+        log.info("Resumed %s at step %d", run_dir, trainer.step)
+    trainer.fit()
+    if not ctx.is_main:
+        return {}
+    model.save_checkpoint(run_dir / model_file(model), scene=scene)
+    results = {**report.final(trainer.step), "world_size": ctx.world_size}
+    episodes = settings.report.rearrangement_episodes
+    if isinstance(model, KINetWorldModel) and episodes > 0:
+        rearrangement = replace(settings.rearrangement, episodes=episodes)
+        summary = evaluate_rearrangement(model.cpu(), rearrangement, run_dir / "rearrangement")
+        results["rearrangement"] = {
+            condition: {method: stats["final_distance"] for method, stats in by_method.items()}
+            for condition, by_method in summary["summary"].items()
+        }
+    atomic_write_json(run_dir / "results.json", results)
+    return results

@@ -1,0 +1,145 @@
+"""The methods of the rearrangement evaluation: one declaration each, with label and controller.
+
+A method's controller factory gets a :class:`MethodContext` (the model, the episode's scene, the
+settings and the episode seed). ``needs`` says which model a method plans with: ``"kinet"``
+(a :class:`~kinet_rl.models.KINetWorldModel`), ``"baseline"`` (IN, VisIN, Forw or ForwInv) or
+``None`` (random pushes and the oracle need no model).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Literal
+
+from torch import nn
+
+from kinet_rl.envs.settings import SceneSettings
+from kinet_rl.envs.workspace import workspace_for
+from kinet_rl.models.model_env import (
+    GraphDistanceReward,
+    GraphSimilarityReward,
+    KeypointChamferReward,
+    KINetReward,
+)
+from kinet_rl.models.push_planner import PushPlanner
+from kinet_rl.models.world_model import KINetWorldModel
+from kinet_rl.rearrangement.controllers import (
+    BaselineMPCController,
+    KINetController,
+    OracleController,
+    RandomController,
+)
+from kinet_rl.rearrangement.episodes import Controller
+from kinet_rl.rearrangement.settings import Condition, RearrangementSettings
+
+ModelKind = Literal["kinet", "baseline"] | None
+
+
+@dataclass(frozen=True)
+class MethodContext:
+    """What a controller factory is given for one episode."""
+
+    model: nn.Module | None
+    scene: SceneSettings
+    settings: RearrangementSettings
+    seed: int
+
+
+@dataclass(frozen=True)
+class Method:
+    """A rearrangement method.
+
+    Attributes:
+        name: Its key in settings, summaries and JSON.
+        label: How reports and tables name it.
+        needs: The model it plans with (see the module docstring).
+        make_controller: Builds its controller for one episode.
+        graph: Whether it plans on KINet's goal graph (it may then be ``kinet_method``).
+    """
+
+    name: str
+    label: str
+    needs: ModelKind
+    make_controller: Callable[[MethodContext], Controller]
+    graph: bool = False
+
+
+def _kinet(reward: type[KINetReward]) -> Callable[[MethodContext], Controller]:
+    def make(ctx: MethodContext) -> Controller:
+        half_size = workspace_for(ctx.scene.task).half_size
+        planner = PushPlanner(
+            ctx.model, half_size, reward=reward(), seed=ctx.seed, **dict(ctx.settings.planner)
+        )
+        return KINetController(planner)
+
+    return make
+
+
+def _oracle(ctx: MethodContext) -> Controller:
+    settings = ctx.settings
+    return OracleController(
+        ctx.scene, settings.oracle_planner, settings.oracle_contact_radius, ctx.seed
+    )
+
+
+METHODS: dict[str, Method] = {
+    method.name: method
+    for method in (
+        Method(
+            "kinet_graph",
+            "KINet-GraphMPC (paper S)",
+            "kinet",
+            _kinet(GraphSimilarityReward),
+            graph=True,
+        ),
+        Method(
+            "kinet_graph_distance",
+            "KINet-GraphMPC (embedding distance)",
+            "kinet",
+            _kinet(GraphDistanceReward),
+            graph=True,
+        ),
+        Method(
+            "kinet_keypoints", "MPC on keypoint positions", "kinet", _kinet(KeypointChamferReward)
+        ),
+        Method("random", "Random pushes", None, lambda ctx: RandomController(ctx.seed)),
+        Method("oracle", "Oracle MPC (GT state, analytic push model)", None, _oracle),
+        Method(
+            "model_mpc",
+            "Baseline model MPC (distance to goal)",
+            "baseline",
+            lambda ctx: BaselineMPCController(ctx.model, ctx.settings.planner, ctx.seed),
+        ),
+    )
+}
+
+
+def check_methods(settings: RearrangementSettings) -> None:
+    """Raises ``ValueError`` before any episode runs if ``settings`` name unknown methods."""
+    unknown = [m for m in settings.methods if m not in METHODS]
+    if unknown:
+        raise ValueError(f"Unknown methods {unknown}; choose from {list(METHODS)}.")
+    graph_methods = [m.name for m in METHODS.values() if m.graph]
+    if settings.kinet_method not in graph_methods:
+        raise ValueError(f"kinet_method={settings.kinet_method!r}; choose one of {graph_methods}.")
+
+
+def check_model(conditions: Iterable[Condition], model: nn.Module | None) -> None:
+    """Raises before any episode runs if a method of ``conditions`` cannot plan with ``model``."""
+    names = sorted({name for condition in conditions for name in condition.methods})
+    missing = [name for name in names if METHODS[name].needs is not None and model is None]
+    if missing:
+        raise ValueError(f"Methods {missing} need a model; pass model= or drop them.")
+    for name in names:
+        needs = METHODS[name].needs
+        if needs == "kinet" and not isinstance(model, KINetWorldModel):
+            raise TypeError(
+                f"Method {name!r} plans with KINet, got a {type(model).__name__}; use method "
+                "'model_mpc' for baseline models."
+            )
+        if needs == "baseline" and isinstance(model, KINetWorldModel):
+            raise TypeError(
+                f"Method {name!r} plans with a baseline model (IN, VisIN, Forw or ForwInv), got "
+                "KINet; use a kinet_* method."
+            )

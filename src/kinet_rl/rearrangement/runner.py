@@ -1,0 +1,136 @@
+"""Runs rearrangement episodes of each method, in parallel workers, and returns the results.
+
+Every episode is a job ``(condition, method, seed)``; jobs run in a ``spawn`` process pool
+(each worker rebuilds the model from its weights once and uses one torch thread) or inline with
+``workers <= 1``. Episode ``i`` of a condition uses seed ``seed + i`` for its scene and goal,
+the same for every method, so methods are compared on identical episodes. Writing reports is the
+caller's (:mod:`kinet_rl.rearrangement.report`).
+"""
+
+from __future__ import annotations
+
+import importlib
+import multiprocessing
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any, cast
+
+import torch
+from tqdm import tqdm
+
+from kinet_rl.models.checkpointing import ConfigCheckpointMixin
+from kinet_rl.rearrangement.episodes import make_episode, run_episode
+from kinet_rl.rearrangement.methods import METHODS, MethodContext, check_methods, check_model
+from kinet_rl.rearrangement.results import EpisodeResult, RearrangementResults
+from kinet_rl.rearrangement.settings import Condition, RearrangementSettings
+
+
+@dataclass(frozen=True)
+class Job:
+    """One episode to run."""
+
+    condition: Condition
+    method: str
+    seed: int
+    record: bool
+
+
+_WORKER_MODEL: torch.nn.Module | None = None
+
+
+def _model_payload(model: torch.nn.Module) -> dict[str, Any]:
+    """What a worker needs to rebuild ``model`` (KINet or a baseline): class, config, weights."""
+    model_class = type(model)
+    return {
+        "class": (model_class.__module__, model_class.__qualname__),
+        "config": dict(cast(ConfigCheckpointMixin, model).config),
+        "state_dict": {k: v.cpu() for k, v in model.state_dict().items()},
+    }
+
+
+def _init_worker(payload: dict[str, Any] | None) -> None:
+    global _WORKER_MODEL
+    torch.set_num_threads(1)
+    if payload is not None:
+        module, name = payload["class"]
+        _WORKER_MODEL = getattr(importlib.import_module(module), name)(**payload["config"])
+        _WORKER_MODEL.load_state_dict(payload["state_dict"])
+        _WORKER_MODEL.eval()
+
+
+def run_job(
+    job: Job, settings: RearrangementSettings, model: torch.nn.Module | None
+) -> EpisodeResult:
+    """Runs one episode of ``job`` with ``model``."""
+    scene = job.condition.scene
+    episode = make_episode(scene, settings.task, job.seed)
+    try:
+        context = MethodContext(model, scene, settings, job.seed)
+        controller = METHODS[job.method].make_controller(context)
+        return run_episode(episode, controller, job.method, settings.task, record=job.record)
+    finally:
+        episode.close()
+
+
+def _run_job_in_worker(args: tuple[Job, RearrangementSettings]) -> tuple[Job, EpisodeResult]:
+    job, settings = args
+    return job, run_job(job, settings, _WORKER_MODEL)
+
+
+def make_jobs(settings: RearrangementSettings, conditions: Iterable[Condition]) -> list[Job]:
+    """All episodes of all conditions; the first ``videos`` ``kinet_method`` comparison episodes are recorded."""
+    jobs = []
+    for condition in conditions:
+        for method in condition.methods:
+            for i in range(condition.episodes):
+                record = (
+                    condition.role == "comparison"
+                    and method == settings.kinet_method
+                    and i < settings.videos
+                )
+                jobs.append(Job(condition, method, settings.seed + i, record))
+    return jobs
+
+
+def _outcomes(jobs: list[Job], settings: RearrangementSettings, model: torch.nn.Module | None):
+    if settings.workers <= 1:
+        for job in jobs:
+            yield job, run_job(job, settings, model)
+        return
+    payload = None if model is None else _model_payload(model)
+    context = multiprocessing.get_context("spawn")
+    with context.Pool(settings.workers, initializer=_init_worker, initargs=(payload,)) as pool:
+        yield from pool.imap_unordered(_run_job_in_worker, [(j, settings) for j in jobs])
+
+
+def run_rearrangement(
+    model: torch.nn.Module | None,
+    settings: RearrangementSettings,
+    generalization: bool = False,
+    progress: bool = False,
+) -> RearrangementResults:
+    """Runs the rearrangement evaluation; checks every method and the model before any episode.
+
+    Args:
+        model: Trained KINet, or a baseline for method ``model_mpc`` (None: only methods that
+            need no model, ``random`` and ``oracle``, can run).
+        settings: The evaluation's settings.
+        generalization: Also run the Table II cells and extra backgrounds.
+        progress: Show a progress bar over episodes.
+    """
+    check_methods(settings)
+    conditions = settings.conditions(generalization)
+    check_model(conditions, model)
+    jobs = make_jobs(settings, conditions)
+    episodes: dict[Condition, dict[str, list[EpisodeResult]]] = {
+        c: {method: [] for method in c.methods} for c in conditions
+    }
+    with tqdm(total=len(jobs), desc="rearrangement episodes", disable=not progress) as bar:
+        for job, result in _outcomes(jobs, settings, model):
+            episodes[job.condition][job.method].append(result)
+            bar.update()
+    for by_method in episodes.values():
+        for results in by_method.values():
+            results.sort(key=lambda r: r.seed)
+    labels = {name: METHODS[name].label for c in conditions for name in c.methods}
+    return RearrangementResults(settings, episodes, labels)

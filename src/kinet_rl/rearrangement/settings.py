@@ -1,0 +1,171 @@
+"""Settings of the rearrangement evaluation: the task, the planners, and the conditions to run.
+
+Plain data only (no models, no envs), so that reports and callers can depend on it alone.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Any, Literal
+
+from kinet_rl.envs.settings import SceneSettings
+
+#: The comparison's methods by default (names of :data:`kinet_rl.rearrangement.methods.METHODS`).
+DEFAULT_METHODS = ("kinet_graph", "kinet_graph_distance", "kinet_keypoints", "random", "oracle")
+
+Role = Literal["comparison", "generalization", "background"]
+
+
+@dataclass(frozen=True)
+class TaskSettings:
+    """Rearrangement task and metric settings (see :mod:`kinet_rl.rearrangement.episodes`)."""
+
+    num_steps: int = 40
+    goal_pushes: int = 4
+    min_goal_distance: float = 0.03
+    success_threshold: float = 0.03
+    max_goal_tries: int = 20
+
+
+def generalization_key(num_objects: int, geometry: str) -> str:
+    """The name of a Table II cell in summaries and JSON, e.g. ``"n3_geom_train"``."""
+    return f"n{num_objects}_geom_{geometry}"
+
+
+@dataclass(frozen=True)
+class Condition:
+    """A scene on which some methods are evaluated.
+
+    Attributes:
+        scene: The scene (its ``num_objects``, ``geometry`` and ``background`` vary by condition).
+        role: ``"comparison"`` (the training scene, every method), ``"generalization"`` (a Table
+            II cell) or ``"background"`` (another background).
+        methods: Method names run on it.
+        episodes: Episodes per method.
+    """
+
+    scene: SceneSettings
+    role: Role
+    methods: tuple[str, ...]
+    episodes: int
+
+    @property
+    def name(self) -> str:
+        """The condition's key in summaries and JSON files."""
+        if self.role == "comparison":
+            return "comparison"
+        if self.role == "generalization":
+            return generalization_key(self.scene.num_objects, self.scene.geometry)
+        return f"background_{self.scene.background}"
+
+
+@dataclass(frozen=True)
+class RearrangementSettings:
+    """Settings of the rearrangement evaluation (mirrors ``conf/eval/rearrange.yaml``).
+
+    Attributes:
+        scene: The training scene (comparisons run on it).
+        task: Task and metric settings.
+        episodes: Episodes per method in the comparison.
+        methods: Methods of the comparison (names in ``kinet_rl.rearrangement.METHODS``).
+        planner: :class:`GraphMPCPlanner` settings of the learned-model controllers.
+        oracle_planner: Planner settings of the oracle (its model is cheap).
+        oracle_contact_radius: Object-plus-pusher radius of the oracle's push model, metres.
+        num_objects: Object counts of the generalization table (empty: skipped).
+        geometries: Geometries of the generalization table.
+        backgrounds: Extra backgrounds to test (e.g. ``["random"]``; empty: skipped).
+        generalization_episodes: Episodes per generalization cell.
+        workers: Parallel worker processes (<= 1 runs inline).
+        seed: Seed of the first episode.
+        videos: Episodes of ``kinet_method`` recorded as GIFs.
+        kinet_method: The KINet planner of the generalization conditions and the videos.
+    """
+
+    scene: SceneSettings = field(default_factory=SceneSettings)
+    task: TaskSettings = field(default_factory=TaskSettings)
+    episodes: int = 4
+    methods: tuple[str, ...] = DEFAULT_METHODS
+    planner: Mapping[str, Any] = field(
+        default_factory=lambda: {
+            "planning_horizon": 1,
+            "optim_steps": 3,
+            "num_candidates": 64,
+            "top_k": 8,
+        }
+    )
+    oracle_planner: Mapping[str, Any] = field(
+        default_factory=lambda: {
+            "planning_horizon": 1,
+            "optim_steps": 5,
+            "num_candidates": 256,
+            "top_k": 16,
+        }
+    )
+    oracle_contact_radius: float = 0.035
+    num_objects: tuple[int, ...] = ()
+    geometries: tuple[str, ...] = ("train", "gen")
+    backgrounds: tuple[str, ...] = ()
+    generalization_episodes: int = 2
+    workers: int = 2
+    seed: int = 10_000
+    videos: int = 1
+    kinet_method: str = "kinet_graph_distance"
+
+    def __post_init__(self) -> None:
+        if self.episodes < 1 or self.task.num_steps < 1:
+            raise ValueError("episodes and task.num_steps must be at least 1.")
+
+    @classmethod
+    def from_dicts(
+        cls, eval_cfg: Mapping[str, Any], env_cfg: Mapping[str, Any]
+    ) -> RearrangementSettings:
+        """Builds settings from plain dicts: the ``eval`` group and the ``env`` group of a run."""
+        task_names = {f.name for f in fields(TaskSettings)}
+        task = TaskSettings(**{k: v for k, v in eval_cfg.items() if k in task_names})
+        own = {f.name for f in fields(cls)} - {"scene", "task"}
+        unknown = set(eval_cfg) - own - task_names
+        if unknown:
+            raise ValueError(
+                f"Unknown rearrangement settings {sorted(unknown)}; allowed: {sorted(own | task_names)}."
+            )
+        kwargs = {k: v for k, v in eval_cfg.items() if k in own}
+        for key in ("methods", "num_objects", "geometries", "backgrounds"):
+            if key in kwargs:
+                kwargs[key] = tuple(kwargs[key] or ())
+        for key in ("planner", "oracle_planner"):
+            if key in kwargs:
+                kwargs[key] = dict(kwargs[key])
+        return cls(scene=SceneSettings.from_mapping(env_cfg), task=task, **kwargs)
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain-container form (for JSON)."""
+        out = asdict(self)
+        out["planner"] = dict(self.planner)
+        out["oracle_planner"] = dict(self.oracle_planner)
+        return out
+
+    def conditions(self, generalization: bool = True) -> list[Condition]:
+        """The comparison, then (if ``generalization``) the Table II cells and backgrounds."""
+        out = [Condition(self.scene, "comparison", self.methods, self.episodes)]
+        if not generalization:
+            return out
+        for geometry in self.geometries if self.scene.task == "blocks" else ("train",):
+            for n in self.num_objects:
+                scene = replace(self.scene, num_objects=n, geometry=geometry)
+                out.append(
+                    Condition(
+                        scene, "generalization", (self.kinet_method,), self.generalization_episodes
+                    )
+                )
+        for background in self.backgrounds:
+            scene = replace(self.scene, background=background)
+            out.append(
+                Condition(
+                    scene,
+                    "background",
+                    (self.kinet_method, "random"),
+                    self.generalization_episodes,
+                )
+            )
+        return out
