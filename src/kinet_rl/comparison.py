@@ -15,11 +15,11 @@ from typing import Any
 
 import torch
 
-from kinet_rl.atomic import atomic_save_with
 from kinet_rl.evaluation.forward import ObjectRollout, start_frames
 from kinet_rl.evaluation.metrics import position_error
 from kinet_rl.keys import ACTION, OBJECT_POS
 from kinet_rl.rearrangement.methods import METHODS
+from kinet_rl.rearrangement.report import plot_curves
 from kinet_rl.rearrangement.settings import generalization_key
 
 #: Row labels of the tables.
@@ -168,24 +168,4 @@ def _initial_distance(
 
 def plot_mpc_curves(mpc: Mapping[str, Mapping[str, Any]], path: Path) -> Path:
     """Mean distance to the goal (mm) after each push, one curve per row, with s.e. bands."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    fig, ax = plt.subplots(figsize=(6.5, 4.0))
-    for row, stats in mpc.items():
-        mean = 1e3 * np.asarray(stats["mean_curve"])
-        sem = 1e3 * np.asarray(stats["sem_curve"])
-        steps = np.arange(len(mean))
-        ax.plot(steps, mean, label=LABELS.get(row, row))
-        ax.fill_between(steps, mean - sem, mean + sem, alpha=0.15)
-    ax.set_xlabel("pushes")
-    ax.set_ylabel("mean object distance to goal (mm)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    atomic_save_with(path, lambda f: fig.savefig(f, format="png", dpi=120))
-    plt.close(fig)
-    return path
+    return plot_curves(dict(mpc), LABELS, path, "MPC: distance to goal")

@@ -17,6 +17,7 @@ from torch import Tensor
 
 from kinet_rl.envs.geometry import SceneGeometry
 from kinet_rl.envs.workspace import workspace_for
+from kinet_rl.keys import ACTION, EPISODE, OBJECT_POS, PIXELS, PIXELS_0, STEP
 
 COLOURS = torch.tensor(
     [[220, 40, 40], [40, 190, 40], [40, 60, 220], [220, 200, 40], [200, 40, 200]],
@@ -132,15 +133,15 @@ class ToyPushData:
         """The ``[B]`` transitions ``(episode, step)`` with the entries of a dataset batch."""
         return TensorDict(
             {
-                "pixels": self.pixels[episode, step],
-                "pixels_0": self.pixels[episode, 0],
-                "action": self.action[episode, step],
-                "object_pos": self.object_pos[episode, step],
-                "episode": episode,
-                "step": step,
+                PIXELS: self.pixels[episode, step],
+                PIXELS_0: self.pixels[episode, 0],
+                ACTION: self.action[episode, step],
+                OBJECT_POS: self.object_pos[episode, step],
+                EPISODE: episode,
+                STEP: step,
                 "next": {
-                    "pixels": self.pixels[episode, step + 1],
-                    "object_pos": self.object_pos[episode, step + 1],
+                    PIXELS: self.pixels[episode, step + 1],
+                    OBJECT_POS: self.object_pos[episode, step + 1],
                 },
             },
             batch_size=episode.shape,
@@ -163,12 +164,12 @@ class ToyPushData:
         frames = first[:, None] + torch.arange(length + 1)
         return TensorDict(
             {
-                "pixels": self.pixels[episode[:, None], frames],
-                "pixels_0": self.pixels[episode, 0],
-                "action": self.action[episode[:, None], frames[:, :-1]],
-                "object_pos": self.object_pos[episode[:, None], frames],
-                "episode": episode,
-                "step": first,
+                PIXELS: self.pixels[episode[:, None], frames],
+                PIXELS_0: self.pixels[episode, 0],
+                ACTION: self.action[episode[:, None], frames[:, :-1]],
+                OBJECT_POS: self.object_pos[episode[:, None], frames],
+                EPISODE: episode,
+                STEP: first,
             },
             batch_size=[batch_size],
         )

@@ -114,9 +114,9 @@ class PushDataset:
             ) from err
         # Row views of the memory maps, indexed with index_select: one row per frame or push
         # (about 9x faster than advanced indexing of the [E, T+1, H, W, 3] tensor).
-        self._frames = _rows(stored["pixels"])  # [E * (T+1), H * W * 3]
-        self._actions = _rows(stored["action"])  # [E * T, 4]
-        self._object_pos = _rows(stored["object_pos"])  # [E * (T+1), N * 2]
+        self._frames = _rows(stored[PIXELS])  # [E * (T+1), H * W * 3]
+        self._actions = _rows(stored[ACTION])  # [E * T, 4]
+        self._object_pos = _rows(stored[OBJECT_POS])  # [E * (T+1), N * 2]
         self.episode_start, self.episode_stop = splits[split]
         self.num_episodes = self.episode_stop - self.episode_start
         if self.num_episodes < 1:

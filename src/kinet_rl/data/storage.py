@@ -26,6 +26,7 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 
 from kinet_rl.atomic import atomic_write_json
+from kinet_rl.keys import ACTION, OBJECT_POS, OBJECT_YAW, PIXELS
 
 logger = logging.getLogger(__name__)
 
@@ -79,10 +80,10 @@ def episode_array_specs(
     """Per-episode shape (without the leading E) and dtype of every stored array."""
     t, h, n = episode_length, image_size, num_objects
     return {
-        "pixels": ((t + 1, h, h, 3), torch.uint8),
-        "action": ((t, 4), torch.float32),
-        "object_pos": ((t + 1, n, 2), torch.float32),
-        "object_yaw": ((t + 1, n), torch.float32),
+        PIXELS: ((t + 1, h, h, 3), torch.uint8),
+        ACTION: ((t, 4), torch.float32),
+        OBJECT_POS: ((t + 1, n, 2), torch.float32),
+        OBJECT_YAW: ((t + 1, n), torch.float32),
         "source_episode": ((), torch.int64),
     }
 

@@ -14,6 +14,7 @@ import numpy as np
 from gymnasium import spaces
 
 from kinet_rl.envs.factory import make_dm_env
+from kinet_rl.keys import OBJECT_POS, OBJECT_YAW, PIXELS, UNSTABLE
 
 __all__ = ["PushGymEnv", "register_gym_envs", "GYM_IDS"]
 
@@ -42,10 +43,10 @@ class PushGymEnv(gymnasium.Env):
         size, num = task_obj.image_size, task_obj.num_objects
         self.observation_space = spaces.Dict(
             {
-                "pixels": spaces.Box(0, 255, (size, size, 3), np.uint8),
-                "object_pos": spaces.Box(-10.0, 10.0, (num, 2), np.float32),
-                "object_yaw": spaces.Box(-np.pi, np.pi, (num,), np.float32),
-                "unstable": spaces.MultiBinary(1),
+                PIXELS: spaces.Box(0, 255, (size, size, 3), np.uint8),
+                OBJECT_POS: spaces.Box(-10.0, 10.0, (num, 2), np.float32),
+                OBJECT_YAW: spaces.Box(-np.pi, np.pi, (num,), np.float32),
+                UNSTABLE: spaces.MultiBinary(1),
             }
         )
         self.action_space = spaces.Box(-1.0, 1.0, (4,), np.float32)
@@ -57,8 +58,8 @@ class PushGymEnv(gymnasium.Env):
 
     def _convert(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         obs = dict(observation)
-        obs["unstable"] = obs["unstable"].astype(np.int8)
-        obs["object_yaw"] = np.clip(obs["object_yaw"], -np.pi, np.pi).astype(np.float32)
+        obs[UNSTABLE] = obs[UNSTABLE].astype(np.int8)
+        obs[OBJECT_YAW] = np.clip(obs[OBJECT_YAW], -np.pi, np.pi).astype(np.float32)
         self._obs = obs
         return obs
 
@@ -73,7 +74,7 @@ class PushGymEnv(gymnasium.Env):
         """Execute one push."""
         timestep = self._env.step(action)
         obs = self._convert(timestep.observation)
-        terminated = bool(obs["unstable"][0])
+        terminated = bool(obs[UNSTABLE][0])
         return (
             obs,
             float(timestep.reward or 0.0),
@@ -88,7 +89,7 @@ class PushGymEnv(gymnasium.Env):
             return None
         if self._obs is None:
             raise RuntimeError("Call reset() before render().")
-        return self._obs["pixels"]
+        return self._obs[PIXELS]
 
     def close(self) -> None:
         """Release rendering resources."""

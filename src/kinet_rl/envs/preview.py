@@ -17,6 +17,7 @@ from PIL import Image, ImageDraw
 from kinet_rl.atomic import atomic_save_with
 from kinet_rl.envs.factory import make_dm_env
 from kinet_rl.envs.ycb import YCB_DIR_ENV
+from kinet_rl.keys import PIXELS
 
 __all__ = ["render_contact_sheet", "main"]
 
@@ -48,7 +49,7 @@ def _scene(
         seed=seed,
         ycb_dir=ycb_dir,
     )
-    return env.reset().observation["pixels"]
+    return env.reset().observation[PIXELS]
 
 
 def render_contact_sheet(size: int = 128, ycb_dir: str | None = None, seed: int = 0) -> Image.Image:

@@ -26,6 +26,7 @@ from kinet_rl.envs.placement import sample_placements
 from kinet_rl.envs.scene import PUSHER_HALF_LENGTH, PUSHER_PARK, PUSHER_RADIUS, SceneLayout
 from kinet_rl.envs.workspace import Workspace
 from kinet_rl.envs.ycb import YcbObject
+from kinet_rl.keys import OBJECT_POS, OBJECT_YAW, PIXELS, UNSTABLE
 
 __all__ = ["PushPhysics", "PushObjects", "PushSettings"]
 
@@ -397,10 +398,10 @@ class PushObjects(base.Task):
         """Pixels from the task's camera plus ground-truth poses and the ``unstable`` flag."""
         xy, yaw = self.object_poses(physics)
         return {
-            "pixels": self.render(physics),
-            "object_pos": xy,
-            "object_yaw": yaw,
-            "unstable": np.array([self._unstable]),
+            PIXELS: self.render(physics),
+            OBJECT_POS: xy,
+            OBJECT_YAW: yaw,
+            UNSTABLE: np.array([self._unstable]),
         }
 
     def render(self, physics: PushPhysics) -> np.ndarray:

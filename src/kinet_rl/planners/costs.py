@@ -14,7 +14,7 @@ from torch import Tensor
 from torchrl.data import Composite, Unbounded
 from torchrl.envs.transforms import Transform
 
-from kinet_rl.keys import GOAL_KP_POS, KP_POS
+from kinet_rl.keys import GOAL_KP_POS, KP_POS, STEP_REWARD
 
 RewardFn = Callable[[Tensor, Tensor], Tensor]
 
@@ -77,7 +77,7 @@ class GoalReward(Transform):
         reward_fn: RewardFn = keypoint_goal_reward,
         in_key: NestedKey = KP_POS,
         goal_key: NestedKey = GOAL_KP_POS,
-        reward_key: NestedKey = "reward",
+        reward_key: NestedKey = STEP_REWARD,
         default_goal: Tensor | None = None,
     ) -> None:
         super().__init__(in_keys=[in_key, goal_key], out_keys=[reward_key])

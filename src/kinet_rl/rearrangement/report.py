@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +18,7 @@ VIDEO_SCALE = 4
 
 
 def plot_curves(
-    by_method: dict[str, dict[str, Any]], labels: dict[str, str], path: Path, title: str
+    by_method: Mapping[str, Mapping[str, Any]], labels: Mapping[str, str], path: Path, title: str
 ) -> Path:
     """Mean distance to goal (mm) over pushes with a standard-error band, one line per method."""
     import matplotlib

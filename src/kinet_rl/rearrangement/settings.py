@@ -28,6 +28,16 @@ class TaskSettings:
     max_goal_tries: int = 20
 
 
+def planner_budget(optim_steps: int, num_candidates: int, top_k: int) -> dict[str, Any]:
+    """:class:`~kinet_rl.planners.GraphMPCPlanner` settings of a one-push-horizon budget."""
+    return {
+        "planning_horizon": 1,
+        "optim_steps": optim_steps,
+        "num_candidates": num_candidates,
+        "top_k": top_k,
+    }
+
+
 def generalization_key(num_objects: int, geometry: str) -> str:
     """The name of a Table II cell in summaries and JSON, e.g. ``"n3_geom_train"``."""
     return f"n{num_objects}_geom_{geometry}"
@@ -86,22 +96,8 @@ class RearrangementSettings:
     task: TaskSettings = field(default_factory=TaskSettings)
     episodes: int = 4
     methods: tuple[str, ...] = DEFAULT_METHODS
-    planner: Mapping[str, Any] = field(
-        default_factory=lambda: {
-            "planning_horizon": 1,
-            "optim_steps": 3,
-            "num_candidates": 64,
-            "top_k": 8,
-        }
-    )
-    oracle_planner: Mapping[str, Any] = field(
-        default_factory=lambda: {
-            "planning_horizon": 1,
-            "optim_steps": 5,
-            "num_candidates": 256,
-            "top_k": 16,
-        }
-    )
+    planner: Mapping[str, Any] = field(default_factory=lambda: planner_budget(3, 64, 8))
+    oracle_planner: Mapping[str, Any] = field(default_factory=lambda: planner_budget(5, 256, 16))
     oracle_contact_radius: float = 0.035
     num_objects: tuple[int, ...] = ()
     geometries: tuple[str, ...] = ("train", "gen")
