@@ -15,6 +15,7 @@ import torch
 from tensordict import TensorDict
 from torch import Tensor
 
+from kinet_rl.data.dataset import sample_steps
 from kinet_rl.envs.geometry import SceneGeometry
 from kinet_rl.envs.workspace import workspace_for
 from kinet_rl.keys import ACTION, EPISODE, OBJECT_POS, PIXELS, PIXELS_0, STEP
@@ -147,10 +148,16 @@ class ToyPushData:
             batch_size=episode.shape,
         )
 
-    def sample(self, batch_size: int, generator: torch.Generator | None = None) -> TensorDict:
-        """``batch_size`` random transitions (see :meth:`transitions`)."""
-        episode = torch.randint(self.action.shape[0], (batch_size,), generator=generator)
-        step = torch.randint(self.action.shape[1], (batch_size,), generator=generator)
+    def sample(
+        self,
+        batch_size: int,
+        generator: torch.Generator | None = None,
+        steps_per_episode: int = 1,
+    ) -> TensorDict:
+        """``batch_size`` random transitions (see :meth:`transitions` and :func:`sample_steps`)."""
+        episode, step = sample_steps(
+            self.action.shape[0], self.action.shape[1], batch_size, steps_per_episode, generator
+        )
         return self.transitions(episode, step)
 
     def sample_sequences(

@@ -160,11 +160,22 @@ class PushDataset:
         offsets = torch.randint(self.num_episodes, (batch_size,), generator=generator)
         return self.episode_start + offsets
 
-    def sample(self, batch_size: int, generator: torch.Generator | None = None) -> TensorDict:
-        """Samples ``batch_size`` transitions uniformly from the split (see :meth:`transitions`)."""
-        episode = self._random_episodes(batch_size, generator)
-        step = torch.randint(self.episode_length, (batch_size,), generator=generator)
-        return self.transitions(episode, step)
+    def sample(
+        self,
+        batch_size: int,
+        generator: torch.Generator | None = None,
+        steps_per_episode: int = 1,
+    ) -> TensorDict:
+        """Samples ``batch_size`` transitions uniformly from the split (see :meth:`transitions`).
+
+        With ``steps_per_episode`` > 1 the batch holds ``batch_size / steps_per_episode`` random
+        episodes with that many distinct random steps each (negatives of a contrastive loss from
+        the same episode).
+        """
+        offsets, step = sample_steps(
+            self.num_episodes, self.episode_length, batch_size, steps_per_episode, generator
+        )
+        return self.transitions(self.episode_start + offsets, step)
 
     def sample_sequences(
         self, batch_size: int, length: int, generator: torch.Generator | None = None
@@ -209,6 +220,32 @@ class PushDataset:
             episode = self.episode_start + chunk // self.episode_length
             step = chunk % self.episode_length
             yield self.transitions(episode, step)
+
+
+def sample_steps(
+    num_episodes: int,
+    episode_length: int,
+    batch_size: int,
+    steps_per_episode: int = 1,
+    generator: torch.Generator | None = None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Random ``(episode, step)`` pairs ``[B]``, ``steps_per_episode`` distinct steps per episode.
+
+    With ``steps_per_episode == 1`` episodes and steps are independent and uniform.
+    """
+    if steps_per_episode == 1:
+        episode = torch.randint(num_episodes, (batch_size,), generator=generator)
+        return episode, torch.randint(episode_length, (batch_size,), generator=generator)
+    if batch_size % steps_per_episode or not 1 <= steps_per_episode <= episode_length:
+        raise ValueError(
+            f"steps_per_episode={steps_per_episode} must divide batch_size={batch_size} and lie in "
+            f"[1, {episode_length}] (the episode length)."
+        )
+    groups = batch_size // steps_per_episode
+    episode = torch.randint(num_episodes, (groups,), generator=generator)
+    steps = torch.rand(groups, episode_length, generator=generator).argsort(-1)
+    steps = steps[:, :steps_per_episode]
+    return episode.repeat_interleave(steps_per_episode), steps.reshape(-1)
 
 
 def load_dataset(

@@ -16,7 +16,7 @@ from torch import Tensor
 
 from kinet_rl.devices import model_device
 from kinet_rl.envs.geometry import SceneGeometry, normalised_to_pixels
-from kinet_rl.evaluation.metrics import keypoint_hit_rate, position_error
+from kinet_rl.evaluation.metrics import keypoint_hit_rate
 from kinet_rl.keys import ACTION, OBJECT_POS, PIXELS, PIXELS_0
 from kinet_rl.models.object_rollout import rollout_keypoints
 
@@ -68,6 +68,34 @@ def start_frames(seq: TensorDictBase) -> TensorDictBase:
     )
 
 
+#: An object counts as moved by a push (or pushes) when its centre moved more than this, metres.
+MOVED_THRESHOLD_M = 0.005
+
+
+class FloorRollout(Protocol):
+    """Object positions read off the true frames (e.g. :class:`~kinet_rl.models.object_rollout.DetectorFloor`)."""
+
+    def __call__(self, frames: Tensor, object_pos: Tensor) -> Tensor: ...
+
+
+def split_errors(pred: Tensor, truth: Tensor, start: Tensor) -> dict[str, float]:
+    """Mean position error (metres) over all objects, moved ones and unmoved ones.
+
+    Args:
+        pred: ``[B, N, 2]`` predicted positions.
+        truth: ``[B, N, 2]`` true positions.
+        start: ``[B, N, 2]`` positions where the prediction started (to tell moved objects).
+    """
+    error = (pred - truth).norm(dim=-1)  # [B, N]
+    moved = (truth - start).norm(dim=-1) > MOVED_THRESHOLD_M
+    return {
+        "all": error.mean().item(),
+        "moved": error[moved].mean().item() if moved.any() else float("nan"),
+        "unmoved": error[~moved].mean().item() if (~moved).any() else float("nan"),
+        "moved_fraction": moved.float().mean().item(),
+    }
+
+
 @torch.no_grad()
 def forward_errors(
     rollout: ObjectRollout,
@@ -75,23 +103,36 @@ def forward_errors(
     horizons: tuple[int, ...] = (1, 5, 10),
     num_sequences: int = 256,
     seed: int = 0,
+    floor: FloorRollout | None = None,
 ) -> dict[int, dict[str, float]]:
-    """Mean object-position error (metres) after ``h`` pushes, the model against no motion.
+    """Mean object-position error (metres) after ``h`` pushes: the model, no motion, the floor.
 
     Returns:
-        ``{h: {"model": err, "no_motion": err}}``, each averaged over objects and sequences.
+        ``{h: {"model": err, "no_motion": err, "model_moved": ..., "model_unmoved": ...,
+        "no_motion_moved": ..., "moved_fraction": ...}}`` averaged over objects and sequences,
+        plus ``"floor"``, ``"floor_moved"`` and ``"floor_unmoved"`` when ``floor`` is given
+        (an object moved when it travelled more than :data:`MOVED_THRESHOLD_M`).
     """
     generator = torch.Generator().manual_seed(seed)
     seq = dataset.sample_sequences(num_sequences, max(horizons), generator)
-    pred = rollout(start_frames(seq), seq[ACTION])  # [B, L, N, 2]
+    predictions = {"model": rollout(start_frames(seq), seq[ACTION])}  # [B, L, N, 2]
+    if floor is not None:
+        predictions["floor"] = floor(seq[PIXELS], seq[OBJECT_POS][:, 0])
     truth = seq[OBJECT_POS]
-    return {
-        h: {
-            "model": position_error(pred[:, h - 1], truth[:, h]).mean().item(),
-            "no_motion": position_error(truth[:, 0], truth[:, h]).mean().item(),
+    out = {}
+    for h in horizons:
+        still = split_errors(truth[:, 0], truth[:, h], truth[:, 0])
+        row = {
+            "no_motion": still["all"],
+            "no_motion_moved": still["moved"],
+            "moved_fraction": still["moved_fraction"],
         }
-        for h in horizons
-    }
+        for name, pred in predictions.items():
+            errors = split_errors(pred[:, h - 1], truth[:, h], truth[:, 0])
+            row |= {name: errors["all"], f"{name}_moved": errors["moved"]}
+            row[f"{name}_unmoved"] = errors["unmoved"]
+        out[h] = row
+    return out
 
 
 @torch.no_grad()
@@ -119,15 +160,26 @@ def forward_table(
     name: str = "KINet",
 ) -> str:
     """Markdown table of :func:`forward_errors` (millimetres) and optional image errors."""
-    header = f"| pushes ahead | {name} error (mm) | no-motion error (mm) | {name} / no-motion |"
-    rule = "|---:|---:|---:|---:|"
+    floor = all("floor" in r for r in errors.values())
+    header = (
+        f"| pushes ahead | {name} error (mm) | no-motion error (mm) | {name} / no-motion | "
+        f"{name} on moved objects (mm) | no motion on moved (mm) | {name} on unmoved (mm) | "
+        "moved objects |"
+    )
+    rule = "|---:|---:|---:|---:|---:|---:|---:|---:|"
+    if floor:
+        header, rule = header + " detector floor (mm) | floor on moved (mm) |", rule + "---:|---:|"
     if image_mse is not None:
         header, rule = header + " image MSE |", rule + "---:|"
     lines = [header, rule]
     for h, r in sorted(errors.items()):
         row = (
             f"| {h} | {1e3 * r['model']:.1f} | {1e3 * r['no_motion']:.1f} | "
-            f"{r['model'] / max(r['no_motion'], 1e-12):.2f} |"
+            f"{r['model'] / max(r['no_motion'], 1e-12):.2f} | {1e3 * r['model_moved']:.1f} | "
+            f"{1e3 * r['no_motion_moved']:.1f} | {1e3 * r['model_unmoved']:.1f} | "
+            f"{100 * r['moved_fraction']:.0f}% |"
         )
+        if floor:
+            row += f" {1e3 * r['floor']:.1f} | {1e3 * r['floor_moved']:.1f} |"
         lines.append(row + (f" {image_mse[h]:.4f} |" if image_mse is not None else ""))
     return "\n".join(lines)

@@ -139,12 +139,14 @@ class TrainingReport:
         """Evaluates on the test split, writes ``report.md`` and final images; returns the numbers."""
         self.model.eval()
         rollout = self.model.object_rollout(self.geometry)
-        errors = forward_errors(rollout, self.test, self.horizons, self.num_sequences)
+        floor = self.model.detector_floor(self.geometry) if self.has_keypoints else None
+        errors = forward_errors(rollout, self.test, self.horizons, self.num_sequences, floor=floor)
         results: dict = {
             "step": step,
             "model": self.model_name,
             "forward_error_m": {h: e["model"] for h, e in errors.items()},
             "no_motion_error_m": {h: e["no_motion"] for h, e in errors.items()},
+            "forward_errors_m": errors,
         }
         sections = [f"# {self.exp_name}: {self.model_name} after {step} steps\n"]
         image_mse = None

@@ -82,6 +82,10 @@ def gaussian_maps(pos: Tensor, height: int, width: int, std: float) -> Tensor:
     return torch.exp(-sq_dist / (2 * std**2))
 
 
+#: How far the gradients of keypoint features reach into the detector.
+FEATURE_GRADS = ("none", "head", "encoder")
+
+
 def fine_channels(channels: int) -> int:
     """Width of the 1/2-resolution level for a detector of width ``channels``."""
     return max(channels // 2, 1)
@@ -125,18 +129,34 @@ class KeypointDetector(nn.Module):
     heatmap-weighted average of the 1/4 features, projected to ``feat_dim``, gives ``phi_k``.
     The same weights encode the initial frame ``I_0`` and the current frame ``I_t``.
 
+    Gradients that reach ``phi_k`` (from the forward and contrastive losses) never move the
+    keypoints: the pooling weights are detached, and with ``feature_grad="head"`` so are the
+    pooled features, so that only the projection learns; ``"encoder"`` lets them train the
+    1/4-resolution encoder as well; ``"none"`` detaches the features (they stay a fixed random
+    projection: the behaviour before this option existed, kept as an ablation).
+
     Reference: KINet, Rezazadeh et al., RA-L 2023, Sec. 3.1.
 
     Args:
         num_keypoints: ``K``.
         feat_dim: ``D``, size of each keypoint's visual feature.
         channels: ``C``, width of the 1/4-resolution features (the 1/2 level has ``C/2``).
+        feature_grad: ``"head"`` or ``"encoder"``: how far feature gradients reach (see above).
     """
 
-    def __init__(self, num_keypoints: int = 6, feat_dim: int = 16, channels: int = 32) -> None:
+    def __init__(
+        self,
+        num_keypoints: int = 6,
+        feat_dim: int = 16,
+        channels: int = 32,
+        feature_grad: str = "head",
+    ) -> None:
         super().__init__()
         if num_keypoints < 1 or feat_dim < 1 or channels < 1:
             raise ValueError("num_keypoints, feat_dim and channels must be positive.")
+        if feature_grad not in FEATURE_GRADS:
+            raise ValueError(f"feature_grad={feature_grad!r}; choose one of {FEATURE_GRADS}.")
+        self.feature_grad = feature_grad
         self.num_keypoints = num_keypoints
         self.feat_dim = feat_dim
         self.channels = channels
@@ -157,8 +177,12 @@ class KeypointDetector(nn.Module):
         fine = self.fine_net(images)
         coarse = self.coarse_net(fine)
         pos, heat = spatial_soft_argmax(self.heatmap_head(coarse))
-        pooled = torch.einsum("nkhw,nchw->nkc", heat, coarse)
-        return EncodedFrames(pos=pos, feat=self.feat_head(pooled), fine=fine, coarse=coarse)
+        maps = coarse.detach() if self.feature_grad == "head" else coarse
+        pooled = torch.einsum("nkhw,nchw->nkc", heat.detach(), maps)
+        feat = self.feat_head(pooled)
+        if self.feature_grad == "none":
+            feat = feat.detach()
+        return EncodedFrames(pos=pos, feat=feat, fine=fine, coarse=coarse)
 
     def forward(self, pixels: Tensor) -> tuple[Tensor, Tensor]:
         """Detects keypoints.

@@ -85,6 +85,27 @@ def rollout_keypoints(model, pixels: Tensor, actions: Tensor) -> Tensor:
     return torch.stack(trajectory, dim=1)
 
 
+def objects_from_keypoints(kp: Tensor, object_pos: Tensor, geometry: SceneGeometry) -> Tensor:
+    """Object positions after each step of a keypoint trajectory (see the module docstring).
+
+    Args:
+        kp: ``[B, L + 1, K, 2]`` keypoints in ``[-1, 1]``, the first at the start frame.
+        object_pos: ``[B, N, 2]`` ground-truth object positions at the start frame, metres.
+        geometry: The camera geometry of the images.
+
+    Returns:
+        ``[B, L, N, 2]`` object positions after steps ``1..L``, metres.
+    """
+    start_px = normalised_to_pixels(kp[:, 0], geometry.image_size)
+    weights = keypoint_membership(start_px, geometry.objects_to_pixels(object_pos))
+    on_table = geometry.projection.to_plane(kp, geometry.object_height)
+    steps = [
+        predict_object_positions(object_pos, on_table[:, 0], on_table[:, h], weights)
+        for h in range(1, kp.shape[1])
+    ]
+    return torch.stack(steps, dim=1)
+
+
 class KeypointObjectRollout:
     """KINet's ``ObjectRollout`` (:mod:`kinet_rl.evaluation.forward`): objects follow keypoints.
 
@@ -100,12 +121,23 @@ class KeypointObjectRollout:
     def __call__(self, start: TensorDictBase, actions: Tensor) -> Tensor:
         device = model_device(self.model)
         kp = rollout_keypoints(self.model, start[PIXELS].to(device), actions.to(device)).cpu()
-        object_pos = start[OBJECT_POS]
-        start_px = normalised_to_pixels(kp[:, 0], self.geometry.image_size)
-        weights = keypoint_membership(start_px, self.geometry.objects_to_pixels(object_pos))
-        on_table = self.geometry.projection.to_plane(kp, self.geometry.object_height)
-        steps = [
-            predict_object_positions(object_pos, on_table[:, 0], on_table[:, h], weights)
-            for h in range(1, kp.shape[1])
-        ]
-        return torch.stack(steps, dim=1)
+        return objects_from_keypoints(kp, start[OBJECT_POS], self.geometry)
+
+
+class DetectorFloor:
+    """The detector floor: object motion read off keypoints *detected* in the true future frames.
+
+    The same read-out as :class:`KeypointObjectRollout` (membership in the start frame, mean
+    keypoint motion on the table) applied to the detector's keypoints of the real frames instead
+    of predicted ones: the error a perfect forward model of the keypoints would still make.
+    """
+
+    def __init__(self, model, geometry: SceneGeometry) -> None:
+        self.model = model
+        self.geometry = geometry
+
+    @torch.no_grad()
+    def __call__(self, frames: Tensor, object_pos: Tensor) -> Tensor:
+        """``[B, L + 1, H, W, 3]`` frames and ``[B, N, 2]`` start positions -> ``[B, L, N, 2]``."""
+        pos, _ = self.model.detector(frames.to(model_device(self.model)))
+        return objects_from_keypoints(pos.cpu(), object_pos, self.geometry)

@@ -18,7 +18,7 @@ from kinet_rl.keys import ACTION, KP_FEAT, KP_NODE_EMB, KP_POS, NEXT_PIXELS, PIX
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.models.interaction import GraphPrediction, KeypointInteractionNet
 from kinet_rl.models.keypoints import KeypointDetector, KeypointReconstructor, pixels_to_input
-from kinet_rl.models.object_rollout import KeypointObjectRollout
+from kinet_rl.models.object_rollout import DetectorFloor, KeypointObjectRollout
 
 log = logging.getLogger(__name__)
 
@@ -35,7 +35,8 @@ class TransitionOutputs:
         next_feat: ``[B, K, D]`` detected ``phi_t+1`` (no gradient).
         reconstruction: ``[B, H, W, 3]`` ``f_rec(I_0, I_t)`` in the centred space (paper Sec. 3.1).
         target: ``[B, H, W, 3]`` ``I_t`` in the same centred space.
-        prediction: Interaction-net output from the detached ``(x_t, phi_t)`` and the action.
+        prediction: Interaction-net output from the detached ``x_t``, the features ``phi_t``
+            (trained by the forward and contrastive losses) and the action.
     """
 
     pos: Tensor
@@ -49,8 +50,9 @@ class TransitionOutputs:
 class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
     """Keypoint detector ``f_kp``, reconstructor ``f_rec`` and interaction net ``f_fwd``.
 
-    Keypoints and features fed to the interaction net are detached, so forward-model losses never
-    reach the detector (paper Sec. 3.5, after Minderer et al. 2019).
+    Keypoints fed to the interaction net are detached, so forward-model losses never move the
+    detector's keypoints (paper Sec. 3.5, after Minderer et al. 2019); the keypoint features
+    ``phi`` are learnt by the forward and contrastive losses (``feature_grad``).
 
     Keys:
         :meth:`forward` reads ``ACTION`` ``[*B, 4]`` and either ``KP_POS`` ``[*B, K, 2]`` +
@@ -69,6 +71,9 @@ class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
         num_hidden: Hidden layers of the graph MLPs.
         num_rounds: ``L`` message-passing rounds.
         deterministic: Ablation: fully connected graph and no KL.
+        feature_grad: ``"head"`` (the feature projection learns from the forward and contrastive
+            losses), ``"encoder"`` (the detector's encoder too) or ``"none"`` (fixed random
+            features, an ablation); see :class:`KeypointDetector`.
     """
 
     checkpoint_format = CHECKPOINT_FORMAT
@@ -84,6 +89,7 @@ class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
         num_hidden: int = 3,
         num_rounds: int = 3,
         deterministic: bool = False,
+        feature_grad: str = "head",
     ) -> None:
         super().__init__()
         self.config: dict[str, Any] = {
@@ -96,8 +102,9 @@ class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
             "num_hidden": num_hidden,
             "num_rounds": num_rounds,
             "deterministic": deterministic,
+            "feature_grad": feature_grad,
         }
-        self.detector = KeypointDetector(num_keypoints, feat_dim, channels)
+        self.detector = KeypointDetector(num_keypoints, feat_dim, channels, feature_grad)
         self.reconstructor = KeypointReconstructor(channels, blob_std)
         self.interaction = KeypointInteractionNet(
             feat_dim, embed_dim, hidden_dim, num_hidden, num_rounds, deterministic
@@ -154,7 +161,7 @@ class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
         observed = self.detector.encode(current)
         reconstruction = self.reconstructor(source, observed)
         target = pixels_to_input(current).permute(0, 2, 3, 1)
-        prediction = self.interaction(observed.pos.detach(), observed.feat.detach(), action)
+        prediction = self.interaction(observed.pos.detach(), observed.feat, action)
         pos, next_pos, next_feat = observed.pos, following_enc.pos, following_enc.feat
         return TransitionOutputs(pos, next_pos, next_feat, reconstruction, target, prediction)
 
@@ -175,3 +182,7 @@ class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
     def object_rollout(self, geometry: SceneGeometry) -> KeypointObjectRollout:
         """Object positions read off predicted keypoints, for forward-prediction evaluation."""
         return KeypointObjectRollout(self, geometry)
+
+    def detector_floor(self, geometry: SceneGeometry) -> DetectorFloor:
+        """Object positions read off keypoints detected in the true frames (Table I's floor)."""
+        return DetectorFloor(self, geometry)

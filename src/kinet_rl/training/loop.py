@@ -23,8 +23,13 @@ log = logging.getLogger(__name__)
 class TransitionSampler(Protocol):
     """Anything that draws random batches of transitions (e.g. a kinet_rl dataset split)."""
 
-    def sample(self, batch_size: int, generator: torch.Generator | None = None) -> TensorDictBase:
-        """Returns a ``[batch_size]`` TensorDict of transitions."""
+    def sample(
+        self,
+        batch_size: int,
+        generator: torch.Generator | None = None,
+        steps_per_episode: int = 1,
+    ) -> TensorDictBase:
+        """Returns a ``[batch_size]`` TensorDict of transitions, ``steps_per_episode`` per episode."""
         ...
 
 
@@ -46,6 +51,8 @@ class TrainerSettings:
         checkpoint_every: steps between checkpoints.
         val_batches: batches averaged per validation.
         seed: seed of batch sampling (each process adds its rank).
+        steps_per_episode: transitions drawn from each sampled episode (> 1 gives a contrastive
+            loss negatives from the same episode).
     """
 
     steps: int = 2000
@@ -57,6 +64,7 @@ class TrainerSettings:
     checkpoint_every: int = 250
     val_batches: int = 8
     seed: int = 0
+    steps_per_episode: int = 1
 
 
 Validator = Callable[[int], dict[str, float]]
@@ -138,7 +146,11 @@ class Trainer:
         return True
 
     def _batch(self, data: TransitionSampler) -> TensorDictBase:
-        return data.sample(self.settings.batch_size, self.generator).to(self.ctx.device)
+        s = self.settings
+        if s.steps_per_episode == 1:
+            return data.sample(s.batch_size, self.generator).to(self.ctx.device)
+        batch = data.sample(s.batch_size, self.generator, steps_per_episode=s.steps_per_episode)
+        return batch.to(self.ctx.device)
 
     def train_step(self) -> TensorDictBase:
         """One optimiser step; returns the detached loss terms."""
