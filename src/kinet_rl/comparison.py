@@ -1,10 +1,12 @@
-"""The comparison tables of ``python -m kinet_rl.tables``: per-sequence forward errors, markdown, plot.
+"""The comparison tables of ``python -m kinet_rl.tables``: forward errors over seeds, markdown, plot.
 
-Units and protocol are the same for every row: Table I is the single-step forward error in
-millimetres (mean ± std over the same held-out test sequences for every model of a camera); the
-MPC table is the ground-truth mean object distance to the goal after ``T`` pushes (mean ± standard
-error over the same episodes) and the success rate; Table II is KINet's MPC final distance per
-object count and geometry.
+Units and protocol are the same for every row: Table I is the forward error in millimetres on the
+same held-out test sequences for every model of a camera, averaged over the sequences of each
+training seed, then mean ± 95% interval (Student's t) over training seeds; the detector floor
+reads object motion off the keypoints KINet detects in the true next frames. The MPC table is the
+ground-truth mean object distance to the goal after ``T`` pushes (mean ± standard error over the
+same episodes) and the success rate; Table II is KINet's MPC final distance per object count and
+geometry.
 """
 
 from __future__ import annotations
@@ -13,11 +15,6 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import torch
-
-from kinet_rl.evaluation.forward import ObjectRollout, start_frames
-from kinet_rl.evaluation.metrics import position_error
-from kinet_rl.keys import ACTION, OBJECT_POS
 from kinet_rl.rearrangement.methods import METHODS
 from kinet_rl.rearrangement.report import plot_curves
 from kinet_rl.rearrangement.settings import generalization_key
@@ -36,51 +33,102 @@ LABELS = {
 }
 
 
-@torch.no_grad()
-def single_step_errors(
-    rollout: ObjectRollout, dataset, num_sequences: int, seed: int = 0
-) -> dict[str, dict[str, float]]:
-    """Single-step position error of the model and of no motion, metres, mean and std over sequences.
+#: Two-sided 95% quantiles of Student's t by degrees of freedom (seeds - 1).
+T_975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262}
 
-    The sequences are drawn with ``seed`` (the same windows for every model of a dataset); a
-    sequence's error is the mean over its objects.
+#: A row's forward errors: one :func:`~kinet_rl.evaluation.forward.forward_errors` dict per seed.
+SeedErrors = Sequence[Mapping[str, Mapping[str, float]]]
+
+
+def seed_interval(values: Sequence[float]) -> tuple[float, float | None]:
+    """Mean and half-width of the 95% interval of the mean (Student's t; None for one value)."""
+    n = len(values)
+    mean = sum(values) / n
+    if n < 2:
+        return mean, None
+    std = (sum((v - mean) ** 2 for v in values) / (n - 1)) ** 0.5
+    return mean, T_975.get(n - 1, 1.96) * std / n**0.5
+
+
+def _forward_cell(per_seed: SeedErrors | None, horizon: int, key: str) -> str:
+    values = [seed[str(horizon)][key] for seed in per_seed or () if key in seed[str(horizon)]]
+    if not values:
+        return "not run"
+    mean, half = seed_interval(values)
+    return f"{mean * 1e3:.1f}" if half is None else f"{mean * 1e3:.1f} ± {half * 1e3:.1f}"
+
+
+def table_i(
+    forward: Mapping[str, Mapping[str, SeedErrors]],
+    models: Sequence[str],
+    cameras: Sequence[str],
+    horizon: int = 1,
+    subset: str = "",
+) -> str:
+    """Table I: forward error (mm) after ``horizon`` pushes; ``forward[model][camera]`` per seed.
+
+    Rows: every model, the detector floor (KINet's own detector, same seeds) and no motion.
+    ``subset`` ``"_moved"`` or ``"_unmoved"`` scores only objects that moved or stayed.
     """
-    seq = dataset.sample_sequences(num_sequences, 1, torch.Generator().manual_seed(seed))
-    pred = rollout(start_frames(seq), seq[ACTION])[:, 0]  # [B, N, 2]
-    truth = seq[OBJECT_POS]
-    errors = {
-        "model": position_error(pred, truth[:, 1]),
-        "no_motion": position_error(truth[:, 0], truth[:, 1]),
-    }
-    return {
-        name: {"mean": e.mean().item(), "std": e.std().item(), "sequences": e.numel()}
-        for name, e in errors.items()
-    }
+    lines = [
+        "| model | " + " | ".join(f"{c} view (mm)" for c in cameras) + " |",
+        "|---|" + "---:|" * len(cameras),
+    ]
+    for model in models:
+        cells = [
+            _forward_cell(forward.get(model, {}).get(c), horizon, f"model{subset}") for c in cameras
+        ]
+        lines.append(f"| {LABELS.get(model, model)} | " + " | ".join(cells) + " |")
+    floors = [
+        _forward_cell(forward.get("kinet", {}).get(c), horizon, f"floor{subset}") for c in cameras
+    ]
+    lines.append(
+        "| Detector floor (KINet's keypoints of the true frames) | " + " | ".join(floors) + " |"
+    )
+    if subset != "_unmoved":
+        no_motion = []
+        for camera in cameras:
+            rows = [forward[m][camera] for m in models if camera in forward.get(m, {})]
+            no_motion.append(
+                _forward_cell(rows[0][:1] if rows else None, horizon, f"no_motion{subset}")
+            )
+        lines.append("| No motion | " + " | ".join(no_motion) + " |")
+    return "\n".join(lines)
+
+
+def horizon_table(
+    forward: Mapping[str, Mapping[str, SeedErrors]],
+    models: Sequence[str],
+    camera: str,
+    horizons: Sequence[int],
+) -> str:
+    """Forward error (mm) on moved objects after each of ``horizons`` pushes, one camera."""
+    lines = [
+        "| model | " + " | ".join(f"{h} push{'es' if h > 1 else ''} (mm)" for h in horizons) + " |",
+        "|---|" + "---:|" * len(horizons),
+    ]
+    for model in models:
+        per_seed = forward.get(model, {}).get(camera)
+        cells = [_forward_cell(per_seed, h, "model_moved") for h in horizons]
+        lines.append(f"| {LABELS.get(model, model)} | " + " | ".join(cells) + " |")
+    kinet = forward.get("kinet", {}).get(camera)
+    lines.append(
+        "| Detector floor | "
+        + " | ".join(_forward_cell(kinet, h, "floor_moved") for h in horizons)
+        + " |"
+    )
+    first = next((forward[m][camera] for m in models if camera in forward.get(m, {})), None)
+    still = [
+        _forward_cell(None if first is None else first[:1], h, "no_motion_moved") for h in horizons
+    ]
+    lines.append("| No motion | " + " | ".join(still) + " |")
+    return "\n".join(lines)
 
 
 def _mm(stats: Mapping[str, float] | None, mean: str = "mean", spread: str = "std") -> str:
     if stats is None:
         return "not run"
     return f"{stats[mean] * 1e3:.1f} ± {stats[spread] * 1e3:.1f}"
-
-
-def table_i(
-    forward: Mapping[str, Mapping[str, Any]], models: Sequence[str], cameras: Sequence[str]
-) -> str:
-    """Table I: single-step forward error (mm), ``forward[model][camera]`` from :func:`single_step_errors`."""
-    lines = [
-        "| model | " + " | ".join(f"{c} view (mm)" for c in cameras) + " |",
-        "|---|" + "---:|" * len(cameras),
-    ]
-    for model in models:
-        cells = [_mm(forward.get(model, {}).get(c, {}).get("model")) for c in cameras]
-        lines.append(f"| {LABELS.get(model, model)} | " + " | ".join(cells) + " |")
-    no_motion = []
-    for camera in cameras:
-        first = next((forward[m][camera] for m in models if camera in forward.get(m, {})), None)
-        no_motion.append(_mm(None if first is None else first["no_motion"]))
-    lines.append("| No motion | " + " | ".join(no_motion) + " |")
-    return "\n".join(lines)
 
 
 def mpc_table(

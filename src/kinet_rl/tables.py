@@ -33,16 +33,11 @@ from hydra.utils import get_class, instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from kinet_rl.atomic import atomic_write_json, atomic_write_text
-from kinet_rl.comparison import (
-    mpc_table,
-    plot_mpc_curves,
-    single_step_errors,
-    table_i,
-    table_ii,
-)
+from kinet_rl.comparison import horizon_table, mpc_table, plot_mpc_curves, table_i, table_ii
 from kinet_rl.configs import config_dir
 from kinet_rl.data import load_dataset
 from kinet_rl.envs.geometry import SceneGeometry
+from kinet_rl.evaluation.forward import forward_errors
 from kinet_rl.models import KINetWorldModel
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.pipeline import (
@@ -80,11 +75,12 @@ def experiment_name(model: str, camera: str) -> str:
     return f"blocks_{camera}view{EXPERIMENT_SUFFIX[model]}"
 
 
-def row_config(tables: DictConfig, model: str, camera: str) -> DictConfig:
-    """The composed training config of a row (needs an initialised Hydra, e.g. inside ``main``)."""
+def row_config(tables: DictConfig, model: str, camera: str, seed: int = 0) -> DictConfig:
+    """The composed training config of a row and training seed (needs an initialised Hydra)."""
     exp = experiment_name(model, camera)
     extra = [o.replace("{camera}", camera) for o in tables.overrides]
     extra += list(tables.model_overrides.get(model, []))
+    extra += [f"seed={seed}", f"trainer.seed={seed}"]
     cfg = compose(config_name="config", overrides=[f"+exp={exp}", *extra])
     if cfg.exp_name != exp:
         raise ValueError(
@@ -125,10 +121,21 @@ def rearrangement_settings(
     return RearrangementSettings.from_dicts(eval_cfg, container["env"])
 
 
-def run_row(tables: DictConfig, model: str, camera: str, out_dir: Path) -> dict[str, Any]:
-    """Trains (unless finished) and evaluates one row; returns its table entries."""
-    cfg = row_config(tables, model, camera)
-    run_dir = out_dir / cfg.exp_name
+def run_dir_of(out_dir: Path, exp_name: str, seed: int) -> Path:
+    """A row's run directory: ``<out>/<exp_name>`` for seed 0, ``<out>/<exp_name>_seed<s>`` else."""
+    return out_dir / (exp_name if seed == 0 else f"{exp_name}_seed{seed}")
+
+
+def run_row(
+    tables: DictConfig, model: str, camera: str, out_dir: Path, seed: int = 0
+) -> dict[str, Any]:
+    """Trains (unless finished) and evaluates one row and seed; returns its table entries.
+
+    Forward errors use the same test sequences (seed 0) for every row and training seed; the MPC
+    evaluation runs for the first training seed only.
+    """
+    cfg = row_config(tables, model, camera, seed)
+    run_dir = run_dir_of(out_dir, cfg.exp_name, seed)
     if not (run_dir / "results.json").is_file():
         start = time.monotonic()
         logger.info("Training %s in %s", cfg.exp_name, run_dir)
@@ -147,13 +154,19 @@ def run_row(tables: DictConfig, model: str, camera: str, out_dir: Path) -> dict[
         expect = {k: settings.env[k] for k in DATASET_ENV_KEYS}
         test = load_dataset(settings.dataset_path, "test", expect)
         scene = settings.scene
-        rollout = net.object_rollout(
-            SceneGeometry.of_scene(scene.task, scene.camera, scene.image_size)
+        geometry = SceneGeometry.of_scene(scene.task, scene.camera, scene.image_size)
+        floor = net.detector_floor(geometry) if isinstance(net, KINetWorldModel) else None
+        return forward_errors(
+            net.object_rollout(geometry),
+            test,
+            tuple(tables.forward_horizons),
+            tables.forward_sequences,
+            seed=0,
+            floor=floor,
         )
-        return single_step_errors(rollout, test, tables.forward_sequences, seed=cfg.seed)
 
     row: dict[str, Any] = {"forward": _cached(run_dir / "tables_forward.json", forward)}
-    if camera == tables.mpc_camera:
+    if camera == tables.mpc_camera and seed == tables.seeds[0]:
         kinet_method = rearrangement_settings(cfg, eval_overrides).kinet_method
         method = kinet_method if isinstance(net, KINetWorldModel) else "model_mpc"
         generalization = model in tables.generalization_models
@@ -186,14 +199,15 @@ def references(tables: DictConfig, out_dir: Path) -> tuple[dict[str, Any], Rearr
 
 def build_tables(tables: DictConfig, out_dir: Path) -> Path:
     """Runs every row (resuming), then writes ``tables.md`` and ``mpc_curves.png``; returns the markdown path."""
-    forward: dict[str, dict[str, Any]] = {}
+    forward: dict[str, dict[str, list[Any]]] = {}
     mpc: dict[str, Any] = {}
     cells: dict[str, dict[str, Any]] = {}
-    rows = [(m, c) for c in tables.cameras for m in tables.models]
-    for i, (model, camera) in enumerate(rows, start=1):
-        logger.info("Row %d/%d: %s, %s view", i, len(rows), model, camera)
-        row = run_row(tables, model, camera, out_dir)
-        forward.setdefault(model, {})[camera] = row["forward"]
+    seeds = list(tables.seeds)
+    rows = [(m, c, s) for s in seeds for c in tables.cameras for m in tables.models]
+    for i, (model, camera, seed) in enumerate(rows, start=1):
+        logger.info("Row %d/%d: %s, %s view, seed %d", i, len(rows), model, camera, seed)
+        row = run_row(tables, model, camera, out_dir, seed)
+        forward.setdefault(model, {}).setdefault(camera, []).append(row["forward"])
         if "mpc" in row:
             mpc[model] = row["mpc"]["comparison"]
             cells[model] = {k: v for k, v in row["mpc"].items() if k != "comparison"}
@@ -206,16 +220,36 @@ def build_tables(tables: DictConfig, out_dir: Path) -> Path:
             "",
             f"Command: `python -m kinet_rl.tables tables={tables.scale}`; row configs: "
             "`+exp=blocks_<camera>view<suffix>` with the overrides of "
-            f"`conf/tables/{tables.scale}.yaml`; seeds: training seed 0, test sequences seed 0, "
-            "rearrangement episodes seed 10000 + i (the same episodes for every row).",
+            f"`conf/tables/{tables.scale}.yaml`; training seeds {seeds}, test sequences seed 0, "
+            "rearrangement episodes seed 10000 + i (the same episodes for every row; MPC with the "
+            f"models of seed {seeds[0]}).",
             "",
             "## Table I: single-step forward error (BlockObjs, 3 objects)",
             "",
-            "Mean object-position error on the table after one push, mm, mean ± std over "
-            f"{tables.forward_sequences} held-out test sequences (start frame only, logged push).",
+            "Mean object-position error on the table after one push, mm: the mean over the same "
+            f"{tables.forward_sequences} held-out test sequences (start frame only, logged push) "
+            f"for each training seed, then mean ± 95% interval over the {len(seeds)} seeds "
+            "(Student's t; no interval for one seed).",
             "",
             table_i(forward, list(tables.models), list(tables.cameras)),
             "",
+            "Objects that moved in the push (more than 5 mm) only:",
+            "",
+            table_i(forward, list(tables.models), list(tables.cameras), subset="_moved"),
+            "",
+            *[
+                line
+                for camera in tables.cameras
+                for line in (
+                    f"Moved objects after several open-loop pushes, {camera} camera (mm, mean ± "
+                    "95% interval over seeds):",
+                    "",
+                    horizon_table(
+                        forward, list(tables.models), camera, list(tables.forward_horizons)
+                    ),
+                    "",
+                )
+            ],
             f"## MPC: distance to goal after T pushes ({tables.mpc_camera} camera)",
             "",
             "Ground-truth mean object distance to its goal position, mm, mean ± standard error over "

@@ -178,3 +178,20 @@ def test_bad_shapes_are_named(pos_shape, feat_shape, action_shape, match):
 def test_rejects_zero_rounds():
     with pytest.raises(ValueError, match="num_rounds"):
         KeypointInteractionNet(num_rounds=0)
+
+
+def test_a_learned_action_frame_starts_as_the_table_frame_and_learns():
+    torch.manual_seed(0)
+    table = KeypointInteractionNet(feat_dim=4, embed_dim=8, hidden_dim=16, num_hidden=1)
+    torch.manual_seed(0)
+    learned = KeypointInteractionNet(
+        feat_dim=4, embed_dim=8, hidden_dim=16, num_hidden=1, action_frame="learned"
+    )
+    learned.load_state_dict(table.state_dict(), strict=False)
+    table.eval(), learned.eval()
+    pos, feat, action = torch.rand(2, 3, 2), torch.rand(2, 3, 4), torch.rand(2, 4)
+    assert torch.allclose(learned(pos, feat, action).next_pos, table(pos, feat, action).next_pos)
+    learned(pos, feat, action).next_pos.sum().backward()
+    assert learned.action_to_image.weight.grad.abs().sum() > 0
+    with pytest.raises(ValueError, match="action_frame='image'"):
+        KeypointInteractionNet(action_frame="image")

@@ -14,7 +14,7 @@ from kinet_rl.models import KINetLoss, KINetWorldModel, graph_info_nce
 LOSS_NAMES = ("loss_rec", "loss_fwd", "loss_kl", "loss_ctr")
 
 
-def make_model(deterministic: bool = False) -> KINetWorldModel:
+def make_model(deterministic: bool = False, feature_grad: str = "head") -> KINetWorldModel:
     torch.manual_seed(0)
     return KINetWorldModel(
         num_keypoints=3,
@@ -25,6 +25,7 @@ def make_model(deterministic: bool = False) -> KINetWorldModel:
         num_hidden=1,
         num_rounds=2,
         deterministic=deterministic,
+        feature_grad=feature_grad,
     )
 
 
@@ -69,7 +70,14 @@ def grad_norms(loss: torch.Tensor, module: torch.nn.Module) -> float:
     return sum(0.0 if g is None else g.abs().sum().item() for g in grads)
 
 
-def test_gradient_isolation_between_detector_and_forward_model():
+def without(module: torch.nn.Module, *skip: torch.nn.Module) -> torch.nn.ModuleList:
+    """The submodules of ``module`` other than ``skip`` (their parameters, for grad_norms)."""
+    skipped = {id(p) for m in skip for p in m.parameters()}
+    rest = torch.nn.ParameterList([p for p in module.parameters() if id(p) not in skipped])
+    return torch.nn.ModuleList([rest])
+
+
+def test_forward_losses_train_the_features_but_never_move_the_keypoints():
     model = make_model()
     losses = KINetLoss(model, kl_weight=1.0, ctr_weight=1.0)(batch())
     detector, interaction = model.detector, model.interaction
@@ -78,8 +86,33 @@ def test_gradient_isolation_between_detector_and_forward_model():
     assert grad_norms(losses["loss_rec"], interaction) == 0
     for name in ("loss_fwd", "loss_kl", "loss_ctr"):
         assert grad_norms(losses[name], interaction) > 0, name
-        assert grad_norms(losses[name], detector) == 0, name
+        assert grad_norms(losses[name], detector.feat_head) > 0, name
+        assert grad_norms(losses[name], without(detector, detector.feat_head)) == 0, name
         assert grad_norms(losses[name], model.reconstructor) == 0, name
+
+
+def test_every_trainable_parameter_gets_a_gradient():
+    for feature_grad in ("head", "encoder"):
+        model = make_model(feature_grad=feature_grad)
+        losses = KINetLoss(model, kl_weight=1.0, ctr_weight=1.0)(batch())
+        sum(losses.values()).backward()
+        dead = [n for n, p in model.named_parameters() if p.grad is None or not p.grad.any()]
+        assert not dead, (feature_grad, dead)
+
+
+def test_encoder_features_reach_the_encoder_but_not_the_heatmaps():
+    model = make_model(feature_grad="encoder")
+    losses = KINetLoss(model, ctr_weight=1.0)(batch())
+    detector = model.detector
+    assert grad_norms(losses["loss_fwd"], detector.coarse_net) > 0
+    assert grad_norms(losses["loss_fwd"], detector.heatmap_head) == 0
+
+
+def test_fixed_feature_ablation_keeps_forward_losses_off_the_detector():
+    model = make_model(feature_grad="none")
+    losses = KINetLoss(model, kl_weight=1.0, ctr_weight=1.0)(batch())
+    for name in ("loss_fwd", "loss_kl", "loss_ctr"):
+        assert grad_norms(losses[name], model.detector) == 0, name
 
 
 def test_deterministic_ablation_has_zero_kl():

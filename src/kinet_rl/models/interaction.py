@@ -11,6 +11,8 @@ import torch
 from torch import Tensor, nn
 
 ACTION_DIM = 4
+#: Frames in which the push's points enter the node update (see :class:`KeypointInteractionNet`).
+ACTION_FRAMES = ("table", "learned")
 
 
 def mlp(in_dim: int, out_dim: int, hidden_dim: int = 128, num_hidden: int = 3) -> nn.Sequential:
@@ -101,7 +103,10 @@ class KeypointInteractionNet(nn.Module):
     ``e' = f_edge(n_i, n_j, e)``, ``e_bar_k = sum_{i != k} z_ik e'_ik``,
     ``n' = n + f_node(n, e_bar, a_k)`` follow, where ``a_k`` is the action ``u`` plus its start and
     end points relative to keypoint ``k`` (keeps the update translation-aware yet permutation
-    equivariant). ``f_state`` maps the final node embedding to ``Delta x``. All functions are shared
+    equivariant). The push is in table coordinates and keypoints in image coordinates; with
+    ``action_frame="learned"`` the push's points are first mapped into the image by a learnt
+    affine map (initialised to the identity), which the top camera barely needs and an angled
+    camera does. ``f_state`` maps the final node embedding to ``Delta x``. All functions are shared
     over keypoints, so the net works for any ``K`` and is permutation equivariant.
 
     Reference: KINet, Rezazadeh et al., RA-L 2023, Sec. 3.2-3.4.
@@ -113,6 +118,8 @@ class KeypointInteractionNet(nn.Module):
         num_hidden: Hidden layers of every MLP (paper: 3 of 128 units).
         num_rounds: ``L`` message-passing rounds.
         deterministic: Ablation: fully connected graph (``z = 1``) and no KL term.
+        action_frame: ``"table"`` (the push's points are used as given) or ``"learned"`` (mapped
+            into the image frame by a learnt affine map before the relative term).
     """
 
     def __init__(
@@ -123,10 +130,18 @@ class KeypointInteractionNet(nn.Module):
         num_hidden: int = 3,
         num_rounds: int = 3,
         deterministic: bool = False,
+        action_frame: str = "table",
     ) -> None:
         super().__init__()
         if num_rounds < 1:
             raise ValueError(f"num_rounds must be >= 1, got {num_rounds}.")
+        if action_frame not in ACTION_FRAMES:
+            raise ValueError(f"action_frame={action_frame!r}; choose one of {ACTION_FRAMES}.")
+        self.action_to_image = None
+        if action_frame == "learned":
+            self.action_to_image = nn.Linear(2, 2)
+            nn.init.eye_(self.action_to_image.weight)
+            nn.init.zeros_(self.action_to_image.bias)
         self.feat_dim = feat_dim
         self.num_rounds = num_rounds
         self.deterministic = deterministic
@@ -194,7 +209,10 @@ class KeypointInteractionNet(nn.Module):
         edges = self.edge_encoder(edge_geometry(pos))
         prob, kl = self._edge_prob(nodes)
         # [*B, K, 2, 2]: push start and end relative to each keypoint
-        action_rel = action.reshape(*action.shape[:-1], 1, 2, 2) - pos.unsqueeze(-2)
+        points = action.reshape(*action.shape[:-1], 1, 2, 2)
+        if self.action_to_image is not None:
+            points = self.action_to_image(points)
+        action_rel = points - pos.unsqueeze(-2)
         action_in = torch.cat(
             [action.unsqueeze(-2).expand(*pos.shape[:-1], ACTION_DIM), action_rel.flatten(-2)], -1
         )

@@ -161,7 +161,14 @@ class KINetLoss(LossModule):
             target_nodes = self.world_model.interaction.embed_nodes(
                 out.next_pos.detach(), out.next_feat.detach()
             )
-            groups = tensordict.get(EPISODE) if self.ctr_negatives == "episode" else None
+            groups = None
+            if self.ctr_negatives == "episode":
+                groups = tensordict.get(EPISODE, None)
+                if groups is None:
+                    raise KeyError(
+                        f"ctr_negatives='episode' needs the {EPISODE!r} of each transition; sample "
+                        "batches with PushDataset.sample() (trainer.steps_per_episode > 1)."
+                    )
             loss_ctr = graph_info_nce(
                 pred.next_nodes, target_nodes, self.ctr_temperature, self.ctr_similarity, groups
             )

@@ -74,6 +74,8 @@ class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
         feature_grad: ``"head"`` (the feature projection learns from the forward and contrastive
             losses), ``"encoder"`` (the detector's encoder too) or ``"none"`` (fixed random
             features, an ablation); see :class:`KeypointDetector`.
+        action_frame: ``"table"`` or ``"learned"``: the frame of the push in the node update (see
+            :class:`KeypointInteractionNet`).
     """
 
     checkpoint_format = CHECKPOINT_FORMAT
@@ -90,6 +92,7 @@ class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
         num_rounds: int = 3,
         deterministic: bool = False,
         feature_grad: str = "head",
+        action_frame: str = "table",
     ) -> None:
         super().__init__()
         self.config: dict[str, Any] = {
@@ -103,11 +106,12 @@ class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
             "num_rounds": num_rounds,
             "deterministic": deterministic,
             "feature_grad": feature_grad,
+            "action_frame": action_frame,
         }
         self.detector = KeypointDetector(num_keypoints, feat_dim, channels, feature_grad)
         self.reconstructor = KeypointReconstructor(channels, blob_std)
         self.interaction = KeypointInteractionNet(
-            feat_dim, embed_dim, hidden_dim, num_hidden, num_rounds, deterministic
+            feat_dim, embed_dim, hidden_dim, num_hidden, num_rounds, deterministic, action_frame
         )
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
