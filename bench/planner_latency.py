@@ -11,7 +11,7 @@ alike; process CPU time is reported too, as it is far less sensitive to other pr
 shared machine. The last line is ``ratio: X``, the geometric mean over settings of our CEM
 wall time over torchrl's CEMPlanner wall time (both without autograd).
 
-``--env kinet`` times the real :class:`~kinet_rl.control.KINetModelEnv` (a randomly initialised
+``--env kinet`` times the real :class:`~kinet_rl.models.KINetModelEnv` (a randomly initialised
 KINet of the default size, 64x64 images, graph-similarity reward) instead of the stand-in.
 
 Usage: python bench/planner_latency.py [--env graph|kinet] [--repeats 3] [--device cpu] [--hidden 128]
@@ -107,8 +107,7 @@ def make_bench_env(kind: str, num_keypoints: int, hidden: int, device: torch.dev
     if kind == "graph":
         env = GraphModelEnv(num_keypoints, hidden, device)
         return env, env.reset()
-    from kinet_rl.control import KINetModelEnv
-    from kinet_rl.models import KINetWorldModel
+    from kinet_rl.models import KINetModelEnv, KINetWorldModel
 
     model = KINetWorldModel(num_keypoints=num_keypoints, hidden_dim=hidden).to(device).eval()
     env = KINetModelEnv(model)

@@ -1,4 +1,4 @@
-"""Toy torchrl model envs for the planner tests, and their own contract tests.
+"""Toy torchrl model envs for the planner tests (their contract tests: ``unit/test_planners_toy_envs.py``).
 
 ``QuadraticModelEnv``: K points, push action moves them (next pos = pos + a), reward is minus
 the squared distance to a fixed goal. ``TrapModelEnv``: a 1-d env whose rewards after ``done``
@@ -13,7 +13,6 @@ from tensordict.nn import TensorDictModule
 from torch import Tensor, nn
 from torchrl.data import Bounded, Composite, Unbounded
 from torchrl.envs.model_based import ModelBasedEnvBase
-from torchrl.envs.utils import check_env_specs
 from torchrl.modules import WorldModelWrapper
 
 from kinet_rl.keys import ACTION, KP_POS
@@ -88,22 +87,3 @@ class TrapModelEnv(ModelBasedEnvBase):
     def _reset(self, tensordict: TensorDict | None, **kwargs) -> TensorDict:
         batch = () if tensordict is None else tensordict.batch_size
         return TensorDict({"pos": torch.zeros(*batch, 1)}, batch_size=batch)
-
-
-def test_quadratic_env_specs_and_dynamics() -> None:
-    env = QuadraticModelEnv(goal=torch.tensor([[1.0, -1.0]]))
-    check_env_specs(env)
-    td = env.reset()
-    td.set(ACTION, torch.tensor([0.5, -0.25]))
-    out = env.step(td)["next"]
-    assert torch.allclose(out[KP_POS], torch.tensor([[0.5, -0.25]]))
-    assert torch.allclose(out["reward"], torch.tensor([-(0.25 + 0.5625)]))
-
-
-def test_trap_env_specs_and_done() -> None:
-    env = TrapModelEnv()
-    check_env_specs(env)
-    td = env.reset()
-    td.set(ACTION, torch.tensor([-1.0]))
-    out = env.step(td)["next"]
-    assert out["done"].item() and out["reward"].item() == -1.0

@@ -8,16 +8,14 @@ from __future__ import annotations
 
 import functools
 import socket
-import sys
 from pathlib import Path
 
 import pytest
 from tensordict import TensorDict
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from fake_push_env import make_fake_env  # noqa: E402
-from kinet_rl.data import collect_dataset, load_dataset  # noqa: E402
-from kinet_rl.data.storage import EPISODES_DIR  # noqa: E402
+from fake_push_env import make_fake_env
+from kinet_rl.data import collect_dataset, load_dataset
+from kinet_rl.data.storage import EPISODES_DIR
 
 pytestmark = pytest.mark.slow
 

@@ -8,42 +8,22 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 import pytest
-import torch
 from hydra import compose, initialize_config_dir
 from PIL import Image
 
 from kinet_rl import plan
-from kinet_rl.control.evaluation import RearrangementSettings, evaluate_rearrangement
-from kinet_rl.control.rearrange import (
-    OracleController,
-    RandomController,
-    SceneSettings,
-    TaskSettings,
-    make_episode,
-    mean_goal_distance,
-    run_episode,
-)
+from kinet_rl.envs import SceneSettings
 from kinet_rl.evaluate import evaluate
-from kinet_rl.models import KINetWorldModel
+from kinet_rl.models.checkpointing import checkpoint_scene
+from kinet_rl.pipeline import evaluate_rearrangement
+from kinet_rl.rearrangement.controllers import OracleController, RandomController
+from kinet_rl.rearrangement.episodes import make_episode, mean_goal_distance, run_episode
+from kinet_rl.rearrangement.settings import RearrangementSettings, TaskSettings
 
 pytestmark = pytest.mark.slow
 
-CONF = Path(__file__).resolve().parents[2] / "conf"
 SCENE = SceneSettings(image_size=32)
 ORACLE = {"planning_horizon": 1, "optim_steps": 5, "num_candidates": 256, "top_k": 16}
-
-
-def tiny_model() -> KINetWorldModel:
-    torch.manual_seed(0)
-    return KINetWorldModel(
-        num_keypoints=4,
-        feat_dim=4,
-        channels=8,
-        embed_dim=8,
-        hidden_dim=16,
-        num_hidden=1,
-        num_rounds=1,
-    )
 
 
 def test_episode_goal_is_reproducible_reachable_and_start_restored() -> None:
@@ -80,7 +60,9 @@ def test_oracle_mpc_beats_random_pushes_in_the_simulator() -> None:
     assert np.mean(finals["oracle"]) < 0.5 * np.mean(finals["random"])
 
 
-def test_evaluate_rearrangement_writes_plot_markdown_json_and_video(tmp_path: Path) -> None:
+def test_evaluate_rearrangement_writes_plot_markdown_json_and_video(
+    tmp_path: Path, tiny_kinet
+) -> None:
     settings = RearrangementSettings(
         scene=SCENE,
         task=TaskSettings(num_steps=3),
@@ -92,7 +74,7 @@ def test_evaluate_rearrangement_writes_plot_markdown_json_and_video(tmp_path: Pa
         backgrounds=("random",),
         generalization_episodes=1,
     )
-    out = evaluate_rearrangement(tiny_model(), settings, tmp_path, generalization=True)
+    out = evaluate_rearrangement(tiny_kinet(), settings, tmp_path, generalization=True)
     summary = out["summary"]
     assert set(summary) == {"comparison", "n2_geom_gen", "background_random"}
     assert set(summary["comparison"]) == set(settings.methods)
@@ -113,9 +95,10 @@ def test_evaluate_rearrangement_writes_plot_markdown_json_and_video(tmp_path: Pa
     assert video.shape[2] > 2 * video.shape[1] * 0.9
 
 
-def test_plan_cli_prints_pushes_in_metres(tmp_path: Path, capsys) -> None:
+def test_plan_cli_prints_pushes_in_metres(tmp_path: Path, capsys, tiny_kinet) -> None:
     checkpoint = tmp_path / "kinet.pt"
-    tiny_model().save_checkpoint(checkpoint, config={"env": {"task": "blocks", "image_size": 32}})
+    tiny_kinet().save_checkpoint(checkpoint, scene=SCENE)
+    assert checkpoint_scene(checkpoint) == SCENE  # the CLI resizes the 64 px goal to 32 px
     episode = make_episode(SCENE, TaskSettings(), 0)
     try:
         Image.fromarray(episode.start["pixels"]).save(tmp_path / "now.png")
@@ -146,9 +129,9 @@ def test_plan_cli_prints_pushes_in_metres(tmp_path: Path, capsys) -> None:
         assert push["end_xy_m"] == pytest.approx([0.2 * v for v in push["normalised"][2:]])
 
 
-def test_evaluate_entry_point_composes_eval_group(tmp_path: Path) -> None:
+def test_evaluate_entry_point_composes_eval_group(tmp_path: Path, tiny_kinet, conf_dir) -> None:
     checkpoint = tmp_path / "kinet.pt"
-    tiny_model().save_checkpoint(checkpoint)
+    tiny_kinet().save_checkpoint(checkpoint)
     overrides = [
         f"checkpoint={checkpoint}",
         "env.image_size=32",
@@ -164,7 +147,7 @@ def test_evaluate_entry_point_composes_eval_group(tmp_path: Path) -> None:
         "eval.planner.top_k=2",
         "eval.planner.optim_steps=1",
     ]
-    with initialize_config_dir(str(CONF), version_base="1.3"):
+    with initialize_config_dir(str(conf_dir), version_base="1.3"):
         cfg = compose("config", overrides=overrides)
     summary = evaluate(cfg, tmp_path)["summary"]
     assert set(summary) == {"comparison", "n1_geom_train"}

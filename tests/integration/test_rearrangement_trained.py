@@ -9,8 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from kinet_rl.control.evaluation import evaluate_rearrangement
 from kinet_rl.models import KINetWorldModel
+from kinet_rl.pipeline import evaluate_rearrangement
+from kinet_rl.rearrangement.settings import RearrangementSettings
 
 pytestmark = pytest.mark.slow
 
@@ -30,17 +31,15 @@ def test_trained_kinet_plans_closer_to_the_goal_than_random_pushes(tmp_path: Pat
     result = subprocess.run(command, cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr[-4000:]
     model = KINetWorldModel.from_checkpoint(tmp_path / "run" / "kinet.pt")
-    settings = {
-        "env": SCENE,
-        "eval": {
-            "episodes": 3,
-            "methods": ["kinet_graph", "kinet_graph_distance", "kinet_keypoints", "random"],
-            "num_steps": 10,
-            "workers": 2,
-            "videos": 0,
-            "seed": 10000,
-        },
+    eval_settings = {
+        "episodes": 3,
+        "methods": ["kinet_graph", "kinet_graph_distance", "kinet_keypoints", "random"],
+        "num_steps": 10,
+        "workers": 2,
+        "videos": 0,
+        "seed": 10000,
     }
+    settings = RearrangementSettings.from_dicts(eval_settings, SCENE)
     summary = evaluate_rearrangement(model, settings, tmp_path / "eval")["summary"]["comparison"]
     random_final = summary["random"]["final_distance"]
     for method in ("kinet_graph", "kinet_graph_distance", "kinet_keypoints"):

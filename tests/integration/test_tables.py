@@ -11,19 +11,13 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from kinet_rl.baselines import (
-    ImageForwardInverseModel,
-    ImageForwardModel,
-    ObjectInteractionModel,
-    VisualInteractionModel,
-)
-from kinet_rl.control.evaluation import RearrangementSettings, evaluate_rearrangement
-from kinet_rl.control.rearrange import SceneSettings, TaskSettings
+from kinet_rl.envs import SceneSettings
+from kinet_rl.pipeline import evaluate_rearrangement
+from kinet_rl.rearrangement.settings import RearrangementSettings, TaskSettings
 from kinet_rl.tables import build_tables
 
 pytestmark = pytest.mark.slow
 
-CONF = Path(__file__).resolve().parents[2] / "conf"
 SIZE = 32
 PLANNER = {"planning_horizon": 1, "optim_steps": 2, "num_candidates": 16, "top_k": 4}
 
@@ -55,10 +49,10 @@ SMALL = ["model.hidden_dim=32", "model.num_hidden=1"]
 SMALL_KINET = [*SMALL, "model.num_keypoints=4", "model.embed_dim=16"]
 
 
-def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path) -> None:
+def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, conf_dir) -> None:
     torch.set_num_threads(1)
     models = ["kinet", "kinet_determ", "kinet_no_ctr", "forw", "forwinv", "in", "visin"]
-    with initialize_config_dir(str(CONF), version_base="1.3"):
+    with initialize_config_dir(str(conf_dir), version_base="1.3"):
         tables = compose(config_name="tables", overrides=["tables.forward_sequences=8"]).tables
         OmegaConf.set_struct(tables, False)
         tiny_planner = {"planning_horizon": 1, "optim_steps": 1, "num_candidates": 8, "top_k": 2}
@@ -105,25 +99,11 @@ def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path) -> 
     assert forward["model"]["sequences"] == 8
 
 
-def tiny_baseline(name: str) -> torch.nn.Module:
-    torch.manual_seed(0)
-    small = {"hidden_dim": 16, "num_hidden": 1}
-    if name in ("forw", "forwinv"):
-        model_class = ImageForwardModel if name == "forw" else ImageForwardInverseModel
-        return model_class(feature_dim=8, channels=4, probe_hidden_dim=8, **small)
-    if name == "in":
-        return ObjectInteractionModel(num_objects=3, embed_dim=8, num_rounds=1, **small)
-    return VisualInteractionModel(
-        num_objects=3, image_size=SIZE, crop_size=8.0, crop_resolution=8, feat_dim=4,
-        channels=4, embed_dim=8, num_rounds=1, **small,
-    )  # fmt: skip
-
-
 @pytest.mark.parametrize(
     ("name", "workers"), [("forw", 1), ("forwinv", 1), ("in", 1), ("visin", 2)]
 )
 def test_baseline_mpc_runs_through_the_shared_rearrangement_evaluation(
-    name: str, workers: int, tmp_path: Path
+    name: str, workers: int, tmp_path: Path, tiny_baseline
 ) -> None:
     """An untrained baseline plans a short episode via ``evaluate_rearrangement`` (model_mpc)."""
     settings = RearrangementSettings(
@@ -135,7 +115,7 @@ def test_baseline_mpc_runs_through_the_shared_rearrangement_evaluation(
         workers=workers,
         videos=0,
     )
-    out = evaluate_rearrangement(tiny_baseline(name), settings, tmp_path)
+    out = evaluate_rearrangement(tiny_baseline(name, image_size=SIZE), settings, tmp_path)
     stats = out["summary"]["comparison"]["model_mpc"]
     assert stats["episodes"] == workers and len(stats["mean_curve"]) == 4
     assert all(torch.isfinite(torch.tensor(stats["mean_curve"])))

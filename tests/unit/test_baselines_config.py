@@ -2,18 +2,14 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
 
-CONF = str(Path(__file__).resolve().parents[2] / "conf")
-
 
 @pytest.mark.parametrize("name", ["forw", "forwinv", "in", "visin"])
-def test_model_and_loss_configs_instantiate(name):
-    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
+def test_model_and_loss_configs_instantiate(name, conf_dir):
+    with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3"):
         cfg = compose("config", overrides=[f"model={name}", f"loss={name}", "env.image_size=32"])
     model = instantiate(cfg.model, _convert_="all")
     loss = instantiate(cfg.loss, world_model=model, _convert_="all")

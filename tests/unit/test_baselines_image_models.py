@@ -7,12 +7,10 @@ import torch
 from tensordict import TensorDict
 
 from kinet_rl.atomic import CheckpointError
-from kinet_rl.baselines import (
-    IMAGE_FEAT,
-    ImageForwardInverseModel,
-    ImageForwardLoss,
-    ImageForwardModel,
-)
+from kinet_rl.baselines import ImageForwardInverseModel, ImageForwardLoss, ImageForwardModel
+from kinet_rl.envs import SceneSettings
+from kinet_rl.keys import IMAGE_FEAT
+from kinet_rl.models.checkpointing import checkpoint_scene
 
 B, N, H, D = 4, 3, 32, 8
 TINY = {
@@ -100,7 +98,9 @@ def test_checkpoint_round_trip_and_refusals(tmp_path):
     torch.manual_seed(0)
     model = ImageForwardInverseModel(**TINY).eval()
     path = tmp_path / "forwinv.pt"
-    model.save_checkpoint(path, config={"run": "test"})
+    scene = SceneSettings(image_size=H)
+    model.save_checkpoint(path, scene=scene)
+    assert checkpoint_scene(path) == scene
     loaded = ImageForwardInverseModel.from_checkpoint(
         path, expected_config={"feature_dim": D}
     ).eval()

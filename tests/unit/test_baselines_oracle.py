@@ -7,9 +7,9 @@ import torch
 from tensordict import TensorDict
 from torchrl.envs.utils import check_env_specs
 
-from kinet_rl.control import AnalyticPushModelEnv, analytic_push
+from kinet_rl.baselines import AnalyticPushModelEnv, analytic_push
 from kinet_rl.keys import GOAL_OBJECT_POS, OBJECT_POS
-from kinet_rl.planners import GraphMPCPlanner
+from kinet_rl.planners import GraphMPCPlanner, StateModelEnv
 
 HALF = 0.2
 R = 0.03
@@ -29,6 +29,7 @@ def test_push_moves_only_objects_on_its_path_to_just_past_the_end() -> None:
 
 def test_oracle_env_specs_and_reward() -> None:
     env = AnalyticPushModelEnv(2, HALF, R)
+    assert isinstance(env, StateModelEnv)
     start = TensorDict(
         {OBJECT_POS: torch.tensor([[0.0, 0.0], [0.1, 0.1]]), GOAL_OBJECT_POS: torch.zeros(2, 2)}, []
     )
@@ -37,6 +38,10 @@ def test_oracle_env_specs_and_reward() -> None:
     assert out["reward"].item() == pytest.approx(-(0.1 * 2**0.5) / 2)
     with pytest.raises(KeyError, match="object_pos"):
         env.reset()
+    with pytest.raises(
+        KeyError, match=r"AnalyticPushModelEnv.reset needs .*\('goal', 'object_pos'\)"
+    ):
+        env.reset(start.exclude(GOAL_OBJECT_POS))
 
 
 def test_oracle_planner_brings_objects_to_the_goal_in_the_model() -> None:

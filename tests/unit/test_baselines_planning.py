@@ -9,45 +9,17 @@ import pytest
 import torch
 from torchrl.envs.utils import check_env_specs
 
-from kinet_rl.baselines import (
-    IMAGE_FEAT,
-    ImageForwardInverseModel,
-    ImageForwardModel,
-    ObjectInteractionModel,
-    VisualInteractionModel,
-)
-from kinet_rl.baselines.model_env import (
-    BaselineMPCController,
-    FeatureModelEnv,
-    ObjectModelEnv,
-    make_baseline_env,
-)
-from kinet_rl.control.evaluation import (
-    RearrangementSettings,
-    evaluate_rearrangement,
-    make_controller,
-)
-from kinet_rl.control.rearrange import SceneSettings
-from kinet_rl.keys import GOAL_IMAGE_FEAT, GOAL_OBJECT_POS, OBJECT_FEAT, OBJECT_POS
-from kinet_rl.planners import GraphMPCPlanner
+from kinet_rl.baselines.model_env import FeatureModelEnv, ObjectModelEnv, make_baseline_env
+from kinet_rl.envs import SceneSettings
+from kinet_rl.keys import GOAL_IMAGE_FEAT, GOAL_OBJECT_POS, IMAGE_FEAT, OBJECT_FEAT, OBJECT_POS
+from kinet_rl.pipeline import evaluate_rearrangement
+from kinet_rl.planners import GraphMPCPlanner, StateModelEnv
+from kinet_rl.rearrangement.controllers import BaselineMPCController
+from kinet_rl.rearrangement.methods import METHODS, MethodContext
+from kinet_rl.rearrangement.settings import RearrangementSettings
 
 SIZE, N = 32, 3
 PLANNER = {"planning_horizon": 2, "optim_steps": 2, "num_candidates": 16, "top_k": 4}
-
-
-def tiny(name: str) -> torch.nn.Module:
-    torch.manual_seed(0)
-    small = {"hidden_dim": 16, "num_hidden": 1}
-    if name == "forw":
-        return ImageForwardModel(feature_dim=8, channels=4, probe_hidden_dim=8, **small)
-    if name == "forwinv":
-        return ImageForwardInverseModel(feature_dim=8, channels=4, probe_hidden_dim=8, **small)
-    if name == "in":
-        return ObjectInteractionModel(num_objects=N, embed_dim=8, num_rounds=1, **small)
-    return VisualInteractionModel(
-        num_objects=N, image_size=SIZE, crop_size=8.0, crop_resolution=8, feat_dim=4,
-        channels=4, embed_dim=8, num_rounds=1, **small,
-    )  # fmt: skip
 
 
 def observation(seed: int) -> dict[str, np.ndarray]:
@@ -69,8 +41,8 @@ def start_state(env, seed: int = 0):
 
 
 @pytest.mark.parametrize("name", ["forw", "forwinv", "in", "visin"])
-def test_model_env_specs_and_state_keys(name: str) -> None:
-    env = make_baseline_env(tiny(name))
+def test_model_env_specs_and_state_keys(name: str, tiny_baseline) -> None:
+    env = make_baseline_env(tiny_baseline(name))
     state = start_state(env)
     keys = (
         [OBJECT_POS, OBJECT_FEAT, GOAL_OBJECT_POS]
@@ -79,12 +51,12 @@ def test_model_env_specs_and_state_keys(name: str) -> None:
     )
     assert set(keys) == set(env.state_spec.keys(True, True))
     assert env.state_spec.is_in(state)
-    assert not env.batch_locked
+    assert not env.batch_locked and isinstance(env, StateModelEnv)
     check_env_specs(env, tensordict=env.reset(state))
 
 
-def test_object_env_reward_is_minus_mean_goal_distance_of_the_prediction() -> None:
-    model = tiny("in")
+def test_object_env_reward_is_minus_mean_goal_distance_of_the_prediction(tiny_baseline) -> None:
+    model = tiny_baseline("in")
     env = ObjectModelEnv(model)
     state = start_state(env).expand(5).clone()
     state["action"] = torch.rand(5, 4) * 2 - 1
@@ -95,8 +67,8 @@ def test_object_env_reward_is_minus_mean_goal_distance_of_the_prediction() -> No
     torch.testing.assert_close(out["next", OBJECT_POS], pred)
 
 
-def test_feature_env_reward_is_minus_squared_feature_distance() -> None:
-    model = tiny("forw")
+def test_feature_env_reward_is_minus_squared_feature_distance(tiny_baseline) -> None:
+    model = tiny_baseline("forw")
     env = FeatureModelEnv(model)
     state = start_state(env).expand(5).clone()
     state["action"] = torch.rand(5, 4) * 2 - 1
@@ -106,16 +78,16 @@ def test_feature_env_reward_is_minus_squared_feature_distance() -> None:
     torch.testing.assert_close(out["next", "reward"], expected)
 
 
-def test_visin_state_carries_crop_features_of_the_current_image() -> None:
-    env = ObjectModelEnv(tiny("visin"))
+def test_visin_state_carries_crop_features_of_the_current_image(tiny_baseline) -> None:
+    env = ObjectModelEnv(tiny_baseline("visin"))
     a, b = start_state(env, 0), start_state(env, 5)
     assert a[OBJECT_FEAT].shape == (N, 4)
     assert not torch.allclose(a[OBJECT_FEAT], b[OBJECT_FEAT])
 
 
-def test_in_env_planning_improves_the_goal_reward_over_random_actions() -> None:
+def test_in_env_planning_improves_the_goal_reward_over_random_actions(tiny_baseline) -> None:
     """CEM finds pushes whose predicted reward beats the mean of random pushes."""
-    env = ObjectModelEnv(tiny("in"))
+    env = ObjectModelEnv(tiny_baseline("in"))
     state = start_state(env)
     planner = GraphMPCPlanner(env, generator=torch.Generator().manual_seed(0), **PLANNER)
     planned = planner(state.clone())["action"]
@@ -129,11 +101,10 @@ def test_in_env_planning_improves_the_goal_reward_over_random_actions() -> None:
 
 
 @pytest.mark.parametrize("name", ["forw", "forwinv", "in", "visin"])
-def test_controller_acts_in_bounds_through_make_controller(name: str) -> None:
+def test_controller_acts_in_bounds_through_the_method_registry(name: str, tiny_baseline) -> None:
     settings = RearrangementSettings(methods=("model_mpc",), planner=PLANNER)
-    controller = make_controller(
-        "model_mpc", tiny(name), SceneSettings(image_size=SIZE), settings, 0
-    )
+    context = MethodContext(tiny_baseline(name), SceneSettings(image_size=SIZE), settings, 0)
+    controller = METHODS["model_mpc"].make_controller(context)
     assert isinstance(controller, BaselineMPCController)
     goal = observation(1)
     controller.reset(SimpleNamespace(goal_pos=goal["object_pos"], goal_pixels=goal["pixels"]))
@@ -142,14 +113,15 @@ def test_controller_acts_in_bounds_through_make_controller(name: str) -> None:
     assert np.abs(action).max() <= 1.0
 
 
-def test_wrong_model_kinds_are_refused_with_a_clear_error() -> None:
+def test_wrong_model_kinds_are_refused_with_a_clear_error(tiny_baseline) -> None:
     settings = RearrangementSettings(methods=("model_mpc",), planner=PLANNER)
+    kinet_settings = RearrangementSettings(methods=("kinet_graph",), planner=PLANNER)
     with pytest.raises(TypeError, match="model_mpc"):
-        make_controller("kinet_graph", tiny("in"), SceneSettings(), settings, 0)
+        evaluate_rearrangement(tiny_baseline("in"), kinet_settings, "unused")
     with pytest.raises(TypeError, match="kinet_graph"):
         make_baseline_env(torch.nn.Linear(2, 2))
     with pytest.raises(ValueError, match="need a model"):
         evaluate_rearrangement(None, settings, "unused")
-    controller = BaselineMPCController(tiny("in"), PLANNER, 0)
+    controller = BaselineMPCController(tiny_baseline("in"), PLANNER, 0)
     with pytest.raises(RuntimeError, match="reset"):
         controller.act(observation(0))

@@ -3,23 +3,21 @@
 from __future__ import annotations
 
 import functools
-import sys
 from pathlib import Path
 
 import pytest
 import torch
 from tensordict import TensorDict
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from fake_push_env import make_fake_env  # noqa: E402
-from kinet_rl.data import (  # noqa: E402
+from fake_push_env import make_fake_env
+from kinet_rl.data import (
     DatasetIncompleteError,
     DatasetMismatchError,
     collect_dataset,
     load_dataset,
     split_ranges,
 )
-from kinet_rl.data.storage import EPISODES_DIR, EpisodeWriter  # noqa: E402
+from kinet_rl.data.storage import EPISODES_DIR, EpisodeWriter
 
 ENV_CONFIG = {"task": "fake", "camera": "top", "image_size": 8}
 

@@ -10,19 +10,24 @@ from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
+from kinet_rl.configs import config_dir
 from kinet_rl.data import RandomPushPolicy, collect_dataset
 
-CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
-EXPERIMENTS = sorted(p.stem for p in (CONF_DIR / "exp").glob("*.yaml"))
+#: Parametrization needs the experiments at collection time, before fixtures exist.
+EXPERIMENTS = sorted(p.stem for p in (Path(config_dir()) / "exp").glob("*.yaml"))
 
 
-def compose_config(overrides: list[str]):
-    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        return compose(config_name="config", overrides=overrides)
+@pytest.fixture
+def compose_config(conf_dir):
+    def compose_with(overrides: list[str]):
+        with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3"):
+            return compose(config_name="config", overrides=overrides)
+
+    return compose_with
 
 
 @pytest.mark.parametrize("overrides", [[]] + [[f"+exp={name}"] for name in EXPERIMENTS])
-def test_config_composes_into_valid_collect_arguments(overrides: list[str]) -> None:
+def test_config_composes_into_valid_collect_arguments(overrides: list[str], compose_config) -> None:
     cfg = compose_config(overrides)
     data = OmegaConf.to_container(cfg.data, resolve=True)
     generalization = data.pop("generalization")
@@ -35,7 +40,7 @@ def test_config_composes_into_valid_collect_arguments(overrides: list[str]) -> N
         assert set(extra.get("env", {})) <= set(inspect.signature(env_fn.func).parameters)
 
 
-def test_paper_experiments_have_the_paper_sizes() -> None:
+def test_paper_experiments_have_the_paper_sizes(compose_config) -> None:
     cfg = compose_config(["+exp=blocks_topview"])
     assert cfg.data.num_episodes == 8000 and cfg.env.camera == "top" and cfg.env.num_objects == 3
     sizes = {name: extra.num_episodes for name, extra in cfg.data.generalization.items()}

@@ -4,16 +4,14 @@ from __future__ import annotations
 
 import functools
 import json
-import sys
 from pathlib import Path
 
 import pytest
 import torch
 from tensordict import TensorDict
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from fake_push_env import make_fake_env  # noqa: E402
-from kinet_rl.data import (  # noqa: E402
+from fake_push_env import make_fake_env
+from kinet_rl.data import (
     DatasetCorruptError,
     DatasetIncompleteError,
     DatasetMismatchError,
@@ -21,7 +19,7 @@ from kinet_rl.data import (  # noqa: E402
     collect_dataset,
     load_dataset,
 )
-from kinet_rl.data.storage import EPISODES_DIR, METADATA_FILE  # noqa: E402
+from kinet_rl.data.storage import EPISODES_DIR, METADATA_FILE
 
 H, T, N = 8, 4, 3
 ENV_CONFIG = {"task": "fake", "camera": "top", "image_size": H}

@@ -2,17 +2,13 @@
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 import torch
 from tensordict import TensorDict
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from fake_push_env import make_fake_env  # noqa: E402
-from kinet_rl.data import EpisodeSeeding, RandomPushPolicy  # noqa: E402
+from fake_push_env import make_fake_env
+from kinet_rl.data import EpisodeSeeding, RandomPushPolicy
 
 HALF = 0.3
 

@@ -1,13 +1,10 @@
+"""Keypoint hit rate and object-position error against ground truth."""
+
 from __future__ import annotations
 
 import torch
 
-from kinet_rl.evaluation.metrics import (
-    keypoint_hit_rate,
-    keypoint_membership,
-    position_error,
-    predict_object_positions,
-)
+from kinet_rl.evaluation.metrics import keypoint_hit_rate, position_error
 
 
 def test_hit_rate_counts_objects_with_a_close_keypoint():
@@ -17,31 +14,10 @@ def test_hit_rate_counts_objects_with_a_close_keypoint():
     assert keypoint_hit_rate(kp, obj, radius_px=30.0) == 1.0
 
 
-def test_membership_gives_every_object_a_keypoint_and_rows_sum_to_one():
-    obj = torch.tensor([[[0.0, 0.0], [1.0, 0.0], [5.0, 5.0]]])
-    kp = torch.tensor([[[0.1, 0.0], [-0.1, 0.0], [0.9, 0.0], [3.0, 3.0]]])
-    w = keypoint_membership(kp, obj)
-    assert w.shape == (1, 3, 4)
-    torch.testing.assert_close(w.sum(-1), torch.ones(1, 3))
-    # object 0 owns keypoints 0 and 1 equally; object 2 owns keypoint 3 (its nearest)
-    torch.testing.assert_close(w[0, 0], torch.tensor([0.5, 0.5, 0.0, 0.0]))
-    torch.testing.assert_close(w[0, 2], torch.tensor([0.0, 0.0, 0.0, 1.0]))
-
-
-def test_orphan_object_takes_its_nearest_keypoint():
-    obj = torch.tensor([[[0.0, 0.0], [0.5, 0.0]]])
-    kp = torch.tensor([[[0.0, 0.0], [0.1, 0.0]]])  # both closer to object 0
-    w = keypoint_membership(kp, obj)
-    torch.testing.assert_close(w[0, 1], torch.tensor([0.0, 1.0]))
-
-
-def test_prediction_moves_objects_with_their_keypoints():
-    obj = torch.tensor([[[0.0, 0.0], [1.0, 1.0]]])
-    kp0 = torch.tensor([[[0.0, 0.0], [1.0, 1.0]]])
-    kp1 = kp0 + torch.tensor([[[0.2, 0.0], [0.0, 0.0]]])
-    pred = predict_object_positions(obj, kp0, kp1, keypoint_membership(kp0, obj))
-    torch.testing.assert_close(pred, torch.tensor([[[0.2, 0.0], [1.0, 1.0]]]))
-    assert abs(position_error(pred, obj).item() - 0.1) < 1e-6
+def test_position_error_is_the_mean_distance_per_sample():
+    pred = torch.tensor([[[0.0, 0.0], [1.0, 1.0]], [[3.0, 4.0], [0.0, 0.0]]])
+    target = torch.zeros(2, 2, 2)
+    torch.testing.assert_close(position_error(pred, target), torch.tensor([2**0.5 / 2, 2.5]))
 
 
 def test_hit_rate_counts_only_the_selected_objects() -> None:

@@ -7,30 +7,27 @@ import torch
 from tensordict import TensorDict
 from torchrl.envs.utils import check_env_specs
 
-from kinet_rl.control import KINetModelEnv, chamfer_distance, make_kinet_planner
-from kinet_rl.keys import ACTION, GOAL_KP_NODE_EMB, GOAL_KP_POS, KP_FEAT, KP_POS, PIXELS
-from kinet_rl.models import KINetWorldModel, graph_similarity
+from kinet_rl.keys import (
+    ACTION,
+    GOAL_KP_NODE_EMB,
+    GOAL_KP_POS,
+    GOAL_PIXELS,
+    KP_FEAT,
+    KP_POS,
+    PIXELS,
+)
+from kinet_rl.models import (
+    REWARDS,
+    GraphDistanceReward,
+    GraphSimilarityReward,
+    KeypointChamferReward,
+    KINetModelEnv,
+    chamfer_distance,
+    graph_similarity,
+)
+from kinet_rl.planners import GraphMPCPlanner, StateModelEnv
 
-K = 4
-
-
-def tiny_model(seed: int = 0) -> KINetWorldModel:
-    torch.manual_seed(seed)
-    model = KINetWorldModel(
-        num_keypoints=K,
-        feat_dim=4,
-        channels=8,
-        embed_dim=8,
-        hidden_dim=16,
-        num_hidden=1,
-        num_rounds=1,
-    )
-    return model.eval()
-
-
-def images(batch: tuple[int, ...], seed: int) -> torch.Tensor:
-    gen = torch.Generator().manual_seed(seed)
-    return torch.randint(0, 256, (*batch, 16, 16, 3), generator=gen, dtype=torch.uint8)
+REWARD_CLASSES = [GraphSimilarityReward, GraphDistanceReward, KeypointChamferReward]
 
 
 def test_chamfer_distance_values_and_permutation_invariance() -> None:
@@ -40,39 +37,52 @@ def test_chamfer_distance_values_and_permutation_invariance() -> None:
     assert chamfer_distance(a, b).item() == pytest.approx(0.25)  # 0.5 of 2 points, both ways
 
 
-def test_observe_builds_state_and_goal_graph() -> None:
-    model = tiny_model()
+def test_rewards_by_command_line_name() -> None:
+    assert {
+        "graph": GraphSimilarityReward,
+        "graph_distance": GraphDistanceReward,
+        "keypoints": KeypointChamferReward,
+    } == REWARDS
+
+
+def test_observe_builds_state_and_goal_graph(tiny_kinet, random_images) -> None:
+    model = tiny_kinet()
     env = KINetModelEnv(model)
-    pixels, goal = images((2,), 0), images((), 1)
+    assert isinstance(env, StateModelEnv) and isinstance(env.reward, GraphSimilarityReward)
+    pixels, goal = random_images((2,), 0), random_images((), 1)
     state = env.observe(pixels, goal)
     assert state.batch_size == (2,)
     goal_pos, goal_feat = model.detector(goal)
     expected = model.interaction.embed_nodes(goal_pos, goal_feat)
     assert torch.allclose(state[GOAL_KP_NODE_EMB][1], expected, atol=1e-6)
     assert torch.allclose(state[GOAL_KP_POS][0], goal_pos, atol=1e-6)
-    assert state[KP_POS].shape == (2, K, 2) and state[KP_FEAT].shape == (2, K, 4)
-    reset_input = TensorDict({PIXELS: pixels, ("goal", PIXELS): goal.expand(2, 16, 16, 3)}, [2])
+    k, d = model.config["num_keypoints"], model.config["feat_dim"]
+    assert state[KP_POS].shape == (2, k, 2) and state[KP_FEAT].shape == (2, k, d)
+    reset_input = TensorDict({PIXELS: pixels, GOAL_PIXELS: goal.expand(2, 16, 16, 3)}, [2])
     assert torch.equal(env.reset(reset_input)[KP_POS], state[KP_POS])
 
 
-def test_env_specs_pass_from_a_state() -> None:
-    env = KINetModelEnv(tiny_model())
-    check_env_specs(env, tensordict=env.reset(env.observe(images((), 0), images((), 1))))
+def test_env_specs_pass_from_a_state(tiny_kinet, random_images) -> None:
+    env = KINetModelEnv(tiny_kinet())
+    check_env_specs(
+        env, tensordict=env.reset(env.observe(random_images((), 0), random_images((), 1)))
+    )
 
 
-@pytest.mark.parametrize("reward", ["graph", "graph_distance", "keypoints"])
-def test_step_reward_matches_the_definition(reward: str) -> None:
-    model = tiny_model()
-    env = KINetModelEnv(model, reward=reward)
-    state = env.observe(images((3,), 0), images((), 1))
+@pytest.mark.parametrize("reward", REWARD_CLASSES)
+def test_step_reward_matches_the_definition(reward, tiny_kinet, random_images) -> None:
+    model = tiny_kinet()
+    env = KINetModelEnv(model, reward=reward())
+    state = env.observe(random_images((3,), 0), random_images((), 1))
     action = torch.rand(3, 4) * 2 - 1
     out = env.step(state.clone().set(ACTION, action))["next"]
     with torch.no_grad():
         pred = model.interaction(state[KP_POS], state[KP_FEAT], action)
         pred_nodes = model.interaction.embed_nodes(pred.next_pos, state[KP_FEAT])
-    if reward == "graph":
-        expected = graph_similarity(pred.next_nodes, state[GOAL_KP_NODE_EMB]) / K
-    elif reward == "graph_distance":
+    if reward is GraphSimilarityReward:
+        k = model.config["num_keypoints"]
+        expected = graph_similarity(pred.next_nodes, state[GOAL_KP_NODE_EMB]) / k
+    elif reward is GraphDistanceReward:
         expected = -(pred_nodes - state[GOAL_KP_NODE_EMB]).pow(2).sum(-1).mean(-1)
     else:
         expected = -chamfer_distance(pred.next_pos, state[GOAL_KP_POS])
@@ -81,15 +91,13 @@ def test_step_reward_matches_the_definition(reward: str) -> None:
     assert torch.equal(out[GOAL_KP_NODE_EMB], state[GOAL_KP_NODE_EMB])  # goal carried along
 
 
-@pytest.mark.parametrize("reward", ["graph", "graph_distance", "keypoints"])
-def test_planner_finds_actions_the_model_scores_highly(reward: str) -> None:
-    model = tiny_model()
+@pytest.mark.parametrize("reward", REWARD_CLASSES)
+def test_planner_finds_actions_the_model_scores_highly(reward, tiny_kinet, random_images) -> None:
+    model = tiny_kinet()
     torch.manual_seed(0)
-    planner = make_kinet_planner(
-        model, reward=reward, planning_horizon=1, optim_steps=3, num_candidates=32, top_k=4
-    )
-    env = planner.env
-    state = env.observe(images((), 2), images((), 3))
+    env = KINetModelEnv(model.eval(), reward())
+    planner = GraphMPCPlanner(env, planning_horizon=1, optim_steps=3, num_candidates=32, top_k=4)
+    state = env.observe(random_images((), 2), random_images((), 3))
     action = planner(state.clone())[ACTION]
     assert env.action_spec.is_in(action)
     planned = env.step(state.clone().set(ACTION, action))["next", "reward"].item()
@@ -99,11 +107,13 @@ def test_planner_finds_actions_the_model_scores_highly(reward: str) -> None:
     assert planned >= torch.quantile(random_rewards, 0.9).item()
 
 
-def test_bad_inputs_are_reported() -> None:
-    env = KINetModelEnv(tiny_model())
-    with pytest.raises(ValueError, match="reward"):
-        KINetModelEnv(tiny_model(), reward="pixels")
+def test_bad_inputs_are_reported(tiny_kinet, random_images) -> None:
+    env = KINetModelEnv(tiny_kinet())
     with pytest.raises(ValueError, match="same"):
-        env.observe(images((), 0), torch.zeros(8, 8, 3, dtype=torch.uint8))
+        env.observe(random_images((), 0), torch.zeros(8, 8, 3, dtype=torch.uint8))
     with pytest.raises(KeyError, match="observe"):
         env.reset()
+    with pytest.raises(KeyError, match="KINetModelEnv.reset needs .* state keys"):
+        env.reset(TensorDict({PIXELS: random_images((), 0)}, []))  # no goal image
+    with pytest.raises(TypeError, match="KINetReward object.*GraphDistanceReward"):
+        KINetModelEnv(tiny_kinet(), reward="graph")

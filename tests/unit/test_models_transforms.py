@@ -2,18 +2,14 @@
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import pytest
 import torch
 from torchrl.envs import TransformedEnv
 from torchrl.envs.utils import check_env_specs
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from fake_push_env import make_fake_env  # noqa: E402
-from kinet_rl.keys import KP_FEAT, KP_POS, PIXELS  # noqa: E402
-from kinet_rl.models import KeypointDetector, KeypointTransform  # noqa: E402
+from fake_push_env import make_fake_env
+from kinet_rl.keys import KP_FEAT, KP_POS, PIXELS
+from kinet_rl.models import KeypointDetector, KeypointTransform
 
 
 def keypoint_env(**transform_kwargs) -> TransformedEnv:

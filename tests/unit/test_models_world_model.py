@@ -7,8 +7,10 @@ import torch
 from tensordict import TensorDict
 
 from kinet_rl.atomic import CheckpointError
+from kinet_rl.envs import SceneSettings
 from kinet_rl.keys import ACTION, KP_FEAT, KP_NODE_EMB, KP_POS, PIXELS, PIXELS_0
 from kinet_rl.models import KINetWorldModel
+from kinet_rl.models.checkpointing import checkpoint_scene
 
 CONFIG = {
     "num_keypoints": 3,
@@ -116,8 +118,10 @@ def test_predict_pixels_range_and_no_grad(model):
 
 def test_checkpoint_round_trip(model, tmp_path):
     path = tmp_path / "ckpt" / "model.pt"
-    model.save_checkpoint(path, config={"run": "unit"})
+    scene = SceneSettings(task="ycb", camera="side", image_size=SIZE)
+    model.save_checkpoint(path, scene=scene)
     loaded = KINetWorldModel.from_checkpoint(path, expected_config={"num_keypoints": 3})
+    assert checkpoint_scene(path) == scene
     assert loaded.config == model.config
     for (name, a), (_, b) in zip(
         model.state_dict().items(), loaded.state_dict().items(), strict=True
@@ -129,6 +133,7 @@ def test_checkpoint_round_trip(model, tmp_path):
 def test_checkpoint_truncated_or_corrupt_file_is_refused(model, tmp_path):
     path = tmp_path / "model.pt"
     model.save_checkpoint(path)
+    assert checkpoint_scene(path) is None  # saved without a scene
     data = path.read_bytes()
     path.write_bytes(data[: len(data) // 2])
     with pytest.raises(CheckpointError, match="corrupt or truncated"):
@@ -155,7 +160,7 @@ def test_checkpoint_foreign_or_edited_file_is_refused(model, tmp_path):
     state = {
         "format": "kinet_rl.KINetWorldModel/1",
         "model_config": {**CONFIG, "channels": 16},
-        "config": {},
+        "scene": None,
         "state_dict": model.state_dict(),
     }
     torch.save(state, path)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import pytest
 import torch
 from tensordict import TensorDict
-from test_planners_toy_envs import QuadraticModelEnv
 from torchrl.envs import TransformedEnv
 from torchrl.envs.utils import check_env_specs
 
@@ -16,6 +15,7 @@ from kinet_rl.planners import (
     graph_similarity_reward,
     keypoint_goal_reward,
 )
+from toy_model_envs import QuadraticModelEnv
 
 
 def test_keypoint_goal_reward_values() -> None:

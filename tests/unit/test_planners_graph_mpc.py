@@ -8,13 +8,13 @@ from pathlib import Path
 import pytest
 import torch
 from tensordict import TensorDict
-from test_planners_toy_envs import QuadraticModelEnv, TrapModelEnv
 from torchrl.data import Categorical
 from torchrl.envs import RewardScaling, TransformedEnv
 
 import kinet_rl.planners
 from kinet_rl.keys import ACTION, KP_POS
 from kinet_rl.planners import GraphMPCPlanner
+from toy_model_envs import QuadraticModelEnv, TrapModelEnv
 
 GOAL = torch.tensor([[2.5, -1.5]])
 

@@ -140,6 +140,11 @@ class KINetModelEnv(StateModelEnv):
     """
 
     def __init__(self, model: KINetWorldModel, reward: KINetReward | None = None) -> None:
+        if reward is not None and not callable(reward):
+            raise TypeError(
+                f"reward must be a KINetReward object, got {reward!r}; pass e.g. "
+                f"GraphDistanceReward() (by name: REWARDS[name]() with a name of {sorted(REWARDS)})."
+            )
         self.reward = GraphSimilarityReward() if reward is None else reward
         step = TensorDictModule(
             _GraphStep(model.interaction, self.reward),

@@ -64,6 +64,26 @@ class Method:
     make_controller: Callable[[MethodContext], Controller]
     graph: bool = False
 
+    def check_model(self, model: nn.Module | None) -> None:
+        """Raises ``ValueError``/``TypeError`` naming the problem if this method cannot use ``model``."""
+        if self.needs is not None and model is None:
+            raise ValueError(f"Methods {[self.name]} need a model; pass model= or drop them.")
+        if self.needs == "kinet" and not isinstance(model, KINetWorldModel):
+            raise TypeError(
+                f"Method {self.name!r} plans with KINet, got a {type(model).__name__}; use method "
+                "'model_mpc' for baseline models."
+            )
+        if self.needs == "baseline" and isinstance(model, KINetWorldModel):
+            raise TypeError(
+                f"Method {self.name!r} plans with a baseline model (IN, VisIN, Forw or ForwInv), "
+                "got KINet; use a kinet_* method."
+            )
+
+    def controller(self, ctx: MethodContext) -> Controller:
+        """The method's controller for one episode, after checking the model."""
+        self.check_model(ctx.model)
+        return self.make_controller(ctx)
+
 
 def _kinet(reward: type[KINetReward]) -> Callable[[MethodContext], Controller]:
     def make(ctx: MethodContext) -> Controller:
@@ -132,14 +152,4 @@ def check_model(conditions: Iterable[Condition], model: nn.Module | None) -> Non
     if missing:
         raise ValueError(f"Methods {missing} need a model; pass model= or drop them.")
     for name in names:
-        needs = METHODS[name].needs
-        if needs == "kinet" and not isinstance(model, KINetWorldModel):
-            raise TypeError(
-                f"Method {name!r} plans with KINet, got a {type(model).__name__}; use method "
-                "'model_mpc' for baseline models."
-            )
-        if needs == "baseline" and isinstance(model, KINetWorldModel):
-            raise TypeError(
-                f"Method {name!r} plans with a baseline model (IN, VisIN, Forw or ForwInv), got "
-                "KINet; use a kinet_* method."
-            )
+        METHODS[name].check_model(model)

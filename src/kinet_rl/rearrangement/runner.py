@@ -66,7 +66,7 @@ def run_job(
     episode = make_episode(scene, settings.task, job.seed)
     try:
         context = MethodContext(model, scene, settings, job.seed)
-        controller = METHODS[job.method].make_controller(context)
+        controller = METHODS[job.method].controller(context)
         return run_episode(episode, controller, job.method, settings.task, record=job.record)
     finally:
         episode.close()

@@ -1,0 +1,61 @@
+"""Typed settings of the pipeline built from every experiment config, and checkpoints' scenes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+
+from kinet_rl.configs import config_dir
+from kinet_rl.envs import SceneSettings
+from kinet_rl.models import KINetWorldModel
+from kinet_rl.models.checkpointing import checkpoint_scene
+from kinet_rl.pipeline import ExperimentSettings
+
+EXPERIMENTS = sorted(p.stem for p in (Path(config_dir()) / "exp").glob("*.yaml"))
+
+
+def settings_of(*overrides: str) -> ExperimentSettings:
+    with initialize_config_dir(config_dir(), version_base="1.3"):
+        cfg = compose(config_name="config", overrides=list(overrides))
+    return ExperimentSettings.from_container(OmegaConf.to_container(cfg, resolve=True))
+
+
+@pytest.mark.parametrize("exp", [None, *EXPERIMENTS])
+def test_every_experiment_becomes_typed_settings(exp):
+    settings = settings_of(*([] if exp is None else [f"+exp={exp}"]))
+    assert settings.name == ("default" if exp is None else exp)
+    assert settings.scene == settings.rearrangement.scene
+    assert "_target_" not in settings.env
+    assert settings.dataset_path == Path(settings.data["root"]) / settings.data["name"]
+    identity = settings.identity()
+    assert identity["model"]["_target_"].startswith("kinet_rl.")
+    assert identity["batch_size"] == settings.trainer.batch_size
+    assert isinstance(settings.report.horizons, tuple)
+
+
+def test_default_settings_match_the_config_files():
+    settings = settings_of("trainer.steps=7", "eval.episodes=3", "env.camera=side")
+    assert settings.trainer.steps == 7
+    assert settings.rearrangement.episodes == 3
+    assert settings.scene == SceneSettings(camera="side")
+
+
+def test_an_unknown_eval_key_is_refused_with_the_allowed_ones():
+    with pytest.raises(ValueError, match="Unknown rearrangement settings \\['epsiodes'\\]"):
+        settings_of("+eval.epsiodes=3")
+
+
+def test_a_checkpoint_stores_its_scene_as_typed_data(tmp_path):
+    torch.manual_seed(0)
+    model = KINetWorldModel(num_keypoints=2, channels=8, embed_dim=8, hidden_dim=8, num_hidden=1)
+    scene = SceneSettings(task="ycb", camera="side", image_size=96, num_objects=4)
+    model.save_checkpoint(tmp_path / "with.pt", scene=scene)
+    model.save_checkpoint(tmp_path / "without.pt")
+    assert checkpoint_scene(tmp_path / "with.pt") == scene
+    assert checkpoint_scene(tmp_path / "without.pt") is None
+    state = torch.load(tmp_path / "with.pt", weights_only=True)
+    assert "config" not in state and state["scene"] == scene.as_dict()

@@ -1,0 +1,43 @@
+"""Tests for the ground-truth metrics of an episode and the summaries of results (no simulation)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kinet_rl.rearrangement.episodes import all_within, mean_goal_distance
+from kinet_rl.rearrangement.results import EpisodeResult, RearrangementResults, summarize
+from kinet_rl.rearrangement.settings import RearrangementSettings
+
+
+def test_distance_and_success() -> None:
+    pos = np.array([[0.0, 0.0], [0.1, 0.0]])
+    goal = np.array([[0.0, 0.03], [0.1, 0.01]])
+    assert mean_goal_distance(pos, goal) == pytest.approx(0.02)
+    assert all_within(pos, goal, 0.03) and not all_within(pos, goal, 0.02)
+
+
+def test_summary_statistics() -> None:
+    results = [
+        EpisodeResult("random", s, np.array([0.1, d]), d < 0.03, False)
+        for s, d in ((0, 0.02), (1, 0.04))
+    ]
+    stats = summarize(results)
+    assert stats["final_distance"] == pytest.approx(0.03)
+    assert stats["final_distance_sem"] == pytest.approx(np.std([0.02, 0.04], ddof=1) / np.sqrt(2))
+    assert stats["success_rate"] == 0.5 and stats["mean_curve"][0] == pytest.approx(0.1)
+
+
+def test_results_summarize_each_condition_by_name() -> None:
+    settings = RearrangementSettings(methods=("random",), num_objects=(2,), geometries=("train",))
+    comparison, cell = settings.conditions()
+    episode = EpisodeResult("random", 0, np.array([0.1, 0.05]), False, False)
+    results = RearrangementResults(
+        settings, {comparison: {"random": [episode]}, cell: {"random": [episode, episode]}}, {}
+    )
+    assert results.conditions("generalization") == [cell] and not results.conditions("background")
+    assert results.stats(cell)["random"] == summarize([episode, episode])
+    assert results.summary() == {
+        "comparison": {"random": summarize([episode])},
+        "n2_geom_train": {"random": summarize([episode, episode])},
+    }
