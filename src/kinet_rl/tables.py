@@ -98,11 +98,10 @@ def load_model(cfg: DictConfig, run_dir: Path) -> Any:
 
 
 def _cached(path: Path, compute) -> Any:
-    if path.is_file():
-        return json.loads(path.read_text())
-    value = compute()
-    atomic_write_json(path, value)
-    return value
+    """The JSON at ``path``, computed and written first if missing (always read back: str keys)."""
+    if not path.is_file():
+        atomic_write_json(path, compute())
+    return json.loads(path.read_text())
 
 
 def to_dict(node: DictConfig) -> dict[str, Any]:

@@ -53,7 +53,12 @@ def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, con
     torch.set_num_threads(1)
     models = ["kinet", "kinet_determ", "kinet_no_ctr", "forw", "forwinv", "in", "visin"]
     with initialize_config_dir(str(conf_dir), version_base="1.3"):
-        tables = compose(config_name="tables", overrides=["tables.forward_sequences=8"]).tables
+        overrides = [
+            "tables.forward_sequences=8",
+            "tables.forward_horizons=[1,3]",
+            "tables.seeds=[0,1]",
+        ]
+        tables = compose(config_name="tables", overrides=overrides).tables
         OmegaConf.set_struct(tables, False)
         tiny_planner = {"planning_horizon": 1, "optim_steps": 1, "num_candidates": 8, "top_k": 2}
         tables.eval = {
@@ -82,9 +87,14 @@ def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, con
                   "VisIN (GT state + image)", "No motion", "Random pushes", "Oracle MPC"]:  # fmt: skip
         assert f"| {label}" in text, label
     assert "not run" not in text
-    table_i = text.split("## Table I")[1].split("## MPC")[0]
+    table_i = text.split("## Table I")[1].split("Objects that moved")[0]
     rows_i = [line for line in table_i.splitlines() if line.startswith("| ") and "±" in line]
+    # every model and the detector floor: mean ± 95% interval over the 2 seeds, both cameras;
+    # no motion is the same for every seed (same test sequences), so it has no interval
     assert len(rows_i) == len(models) + 1 and all(line.count("±") == 2 for line in rows_i)
+    assert "| Detector floor" in table_i and "| No motion" in table_i
+    horizons = text.split("Moved objects after several open-loop pushes, top camera")[1]
+    assert "| 3 pushes (mm) |" in horizons.split("## MPC")[0]
     mpc = text.split("## MPC")[1].split("## Table II")[0]
     assert (
         len([line for line in mpc.splitlines() if line.startswith("| ") and "±" in line])
@@ -95,8 +105,12 @@ def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, con
     numbers = [float(x) for x in re.findall(r"(-?\d+\.\d+) ± (\d+\.\d+)", text) for x in x]
     assert numbers and all(torch.isfinite(torch.tensor(numbers)))
     assert (tmp_path / "mpc_curves.png").stat().st_size > 0
-    forward = json.loads((tmp_path / "blocks_sideview_visin" / "tables_forward.json").read_text())
-    assert forward["model"]["sequences"] == 8
+    for run in ("blocks_sideview_visin", "blocks_sideview_visin_seed1"):
+        forward = json.loads((tmp_path / run / "tables_forward.json").read_text())
+        assert set(forward) == {"1", "3"} and forward["1"]["no_motion"] > 0
+    kinet = json.loads((tmp_path / "blocks_topview_seed1" / "tables_forward.json").read_text())
+    assert kinet["1"]["floor"] > 0 and "floor_moved" in kinet["3"]
+    assert not (tmp_path / "blocks_topview_seed1" / "tables_mpc.json").exists()  # MPC: seed 0
 
 
 @pytest.mark.parametrize(
