@@ -60,6 +60,10 @@ def test_run_writes_model_report_images_and_logs(smoke_run: Path) -> None:
     for name in ("keypoints_final.png", "reconstruction_final.png", "keypoints_step000003.png"):
         assert (run / "images" / name).stat().st_size > 0
     assert list((run / "logs").rglob("*.csv")), "CSV logger wrote no scalars"
+    curve = next((run / "logs").rglob("val/forward_error_1_mm.csv")).read_text().split()
+    steps_and_mm = [tuple(float(v) for v in line.split(",")) for line in curve]
+    assert [step for step, _ in steps_and_mm] == [3, 6]  # the learning curve, every validation
+    assert all(0 < mm < 1e3 for _, mm in steps_and_mm)
     model = KINetWorldModel.from_checkpoint(run / "kinet.pt", {"num_keypoints": 6})
     assert model.detector.num_keypoints == 6
 

@@ -27,6 +27,8 @@ log = logging.getLogger(__name__)
 #: A detected keypoint within this many pixels of an object centre counts as a hit (at 64 px).
 HIT_RADIUS_PX_AT_64 = 4.0
 SUMMARY_FRAMES = 8
+#: Validation sequences of the 1-push forward error logged at every validation.
+VALIDATION_SEQUENCES = 128
 SUMMARY_SCALE = 4
 
 
@@ -129,11 +131,16 @@ class TrainingReport:
         )
 
     def on_validate(self, step: int) -> dict[str, float]:
-        """Keypoint accuracy on validation frames, and image summaries of the step."""
-        if not self.has_keypoints:
-            return {}
-        write_summaries(self.run_dir, self.model, self.val, self.geometry, f"step{step:06d}")
-        return {"val/keypoint_accuracy": self.accuracy(self.val)}
+        """The 1-push forward error (mm) on validation sequences (the learning curve), and for
+        KINet the keypoint accuracy and image summaries of the step."""
+        rollout = self.model.object_rollout(self.geometry)
+        errors = forward_errors(rollout, self.val, (1,), VALIDATION_SEQUENCES)[1]
+        scores = {"val/forward_error_1_mm": 1e3 * errors["model"]}
+        scores["val/forward_error_1_moved_mm"] = 1e3 * errors["model_moved"]
+        if self.has_keypoints:
+            write_summaries(self.run_dir, self.model, self.val, self.geometry, f"step{step:06d}")
+            scores["val/keypoint_accuracy"] = self.accuracy(self.val)
+        return scores
 
     def final(self, step: int) -> dict:
         """Evaluates on the test split, writes ``report.md`` and final images; returns the numbers."""
