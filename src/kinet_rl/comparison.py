@@ -15,6 +15,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from kinet_rl.atomic import atomic_save_with
 from kinet_rl.rearrangement.methods import METHODS
 from kinet_rl.rearrangement.report import plot_curves
 from kinet_rl.rearrangement.settings import generalization_key
@@ -212,6 +213,47 @@ def _initial_distance(
         if stats is not None:
             return f"{stats['initial_distance'] * 1e3:.1f}"
     return "-"
+
+
+#: The learning-curve scalar of every run (written by :meth:`TrainingReport.on_validate`).
+CURVE_FILE = "val/forward_error_1_mm.csv"
+
+
+def learning_curve(run_dir: Path) -> list[tuple[int, float]]:
+    """``(step, 1-push validation forward error in mm)`` pairs of a run's CSV log (empty if none)."""
+    path = next(iter(sorted(Path(run_dir).rglob(CURVE_FILE))), None)
+    if path is None:
+        return []
+    pairs = (line.split(",") for line in path.read_text().split())
+    return [(int(float(step)), float(value)) for step, value in pairs]
+
+
+def plot_learning_curves(runs: Mapping[str, Sequence[Path]], path: Path, title: str) -> Path:
+    """1-push validation forward error (mm) against training steps, one line per run.
+
+    ``runs`` maps a row label to its run directories (one per seed; each seed is drawn).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for i, (label, dirs) in enumerate(runs.items()):
+        for j, run_dir in enumerate(dirs):
+            curve = learning_curve(run_dir)
+            if curve:
+                steps, errors = zip(*curve, strict=True)
+                ax.plot(steps, errors, color=f"C{i}", alpha=0.8, label=label if j == 0 else None)
+    ax.set_xlabel("training step")
+    ax.set_ylabel("1-push validation forward error [mm]")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    atomic_save_with(path, lambda f: fig.savefig(f, format="png", dpi=120))
+    plt.close(fig)
+    return path
 
 
 def plot_mpc_curves(mpc: Mapping[str, Mapping[str, Any]], path: Path) -> Path:

@@ -33,7 +33,15 @@ from hydra.utils import get_class, instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from kinet_rl.atomic import atomic_write_json, atomic_write_text
-from kinet_rl.comparison import horizon_table, mpc_table, plot_mpc_curves, table_i, table_ii
+from kinet_rl.comparison import (
+    LABELS,
+    horizon_table,
+    mpc_table,
+    plot_learning_curves,
+    plot_mpc_curves,
+    table_i,
+    table_ii,
+)
 from kinet_rl.configs import config_dir
 from kinet_rl.data import load_dataset
 from kinet_rl.envs.geometry import SceneGeometry
@@ -199,6 +207,7 @@ def references(tables: DictConfig, out_dir: Path) -> tuple[dict[str, Any], Rearr
 def build_tables(tables: DictConfig, out_dir: Path) -> Path:
     """Runs every row (resuming), then writes ``tables.md`` and ``mpc_curves.png``; returns the markdown path."""
     forward: dict[str, dict[str, list[Any]]] = {}
+    run_dirs: dict[str, dict[str, list[Path]]] = {}
     mpc: dict[str, Any] = {}
     cells: dict[str, dict[str, Any]] = {}
     seeds = list(tables.seeds)
@@ -207,12 +216,19 @@ def build_tables(tables: DictConfig, out_dir: Path) -> Path:
         logger.info("Row %d/%d: %s, %s view, seed %d", i, len(rows), model, camera, seed)
         row = run_row(tables, model, camera, out_dir, seed)
         forward.setdefault(model, {}).setdefault(camera, []).append(row["forward"])
+        run_dirs.setdefault(camera, {}).setdefault(LABELS.get(model, model), []).append(
+            run_dir_of(out_dir, experiment_name(model, camera), seed)
+        )
         if "mpc" in row:
             mpc[model] = row["mpc"]["comparison"]
             cells[model] = {k: v for k, v in row["mpc"].items() if k != "comparison"}
     reference_stats, settings = references(tables, out_dir)
     mpc.update(reference_stats)
     plot = plot_mpc_curves(mpc, out_dir / "mpc_curves.png")
+    curves = [
+        plot_learning_curves(runs, out_dir / f"learning_curves_{camera}.png", f"{camera} camera")
+        for camera, runs in run_dirs.items()
+    ]
     text = "\n".join(
         [
             f"# KINet comparison tables ({tables.scale} scale)",
@@ -231,6 +247,9 @@ def build_tables(tables: DictConfig, out_dir: Path) -> Path:
             "(Student's t; no interval for one seed).",
             "",
             table_i(forward, list(tables.models), list(tables.cameras)),
+            "",
+            "Learning curves (1-push forward error on validation sequences, every seed): "
+            + ", ".join(f"![{p.stem}]({p.name})" for p in curves),
             "",
             "Objects that moved in the push (more than 5 mm) only:",
             "",

@@ -105,6 +105,9 @@ def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, con
     numbers = [float(x) for x in re.findall(r"(-?\d+\.\d+) ± (\d+\.\d+)", text) for x in x]
     assert numbers and all(torch.isfinite(torch.tensor(numbers)))
     assert (tmp_path / "mpc_curves.png").stat().st_size > 0
+    for camera in ("top", "side"):
+        assert (tmp_path / f"learning_curves_{camera}.png").stat().st_size > 0
+        assert f"learning_curves_{camera}.png" in text
     for run in ("blocks_sideview_visin", "blocks_sideview_visin_seed1"):
         forward = json.loads((tmp_path / run / "tables_forward.json").read_text())
         assert set(forward) == {"1", "3"} and forward["1"]["no_motion"] > 0
