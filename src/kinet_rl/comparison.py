@@ -244,7 +244,8 @@ def plot_learning_curves(runs: Mapping[str, Sequence[Path]], path: Path, title: 
             curve = learning_curve(run_dir)
             if curve:
                 steps, errors = zip(*curve, strict=True)
-                ax.plot(steps, errors, color=f"C{i}", alpha=0.8, label=label if j == 0 else None)
+                label_once = label if j == 0 else None
+                ax.plot(steps, errors, "o-", ms=3, color=f"C{i}", alpha=0.8, label=label_once)
     ax.set_xlabel("training step")
     ax.set_ylabel("1-push validation forward error [mm]")
     ax.set_title(title)
