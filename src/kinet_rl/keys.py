@@ -20,6 +20,8 @@ NEXT_OBJECT_POS = ("next", OBJECT_POS)
 PIXELS_0 = "pixels_0"  # uint8 [*B, H, W, 3] first frame I_0 of the transition's episode
 EPISODE = "episode"  # int64 [*B] episode index within a dataset
 STEP = "step"  # int64 [*B] push index within its episode
+FUTURE_ACTION = ("future", ACTION)  # float32 [*B, H - 1, 4] the pushes after a transition's
+FUTURE_PIXELS = ("future", PIXELS)  # uint8 [*B, H - 1, H, W, 3] the frames after those pushes
 
 KP_POS = ("keypoints", "pos")  # float32 [*B, K, 2] image coordinates in [-1, 1]
 KP_FEAT = ("keypoints", "feat")  # float32 [*B, K, D]

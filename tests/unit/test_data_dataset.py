@@ -152,3 +152,18 @@ def test_metadata_records_provenance(dataset_path: Path) -> None:
     assert metadata["complete"] and metadata["seed"] == 3 and metadata["num_episodes"] == 10
     assert {"torch", "torchrl", "tensordict", "kinet_rl"} <= set(metadata["versions"])
     assert metadata["splits"] == {"train": [0, 8], "val": [8, 9], "test": [9, 10]}
+
+
+def test_a_horizon_adds_the_following_pushes_and_frames(dataset_path: Path) -> None:
+    data = load_dataset(dataset_path)
+    batch = data.sample(6, torch.Generator().manual_seed(0), steps_per_episode=2, horizon=3)
+    assert batch["future", "pixels"].shape == (6, 2, H, H, 3)
+    assert batch["future", "action"].shape == (6, 2, 4)
+    assert (batch["step"] <= T - 3).all()  # the whole window lies inside the episode
+    seq = data.transitions(batch["episode"], batch["step"] + 1, horizon=2)
+    assert torch.equal(seq["next", "pixels"], batch["future", "pixels"][:, 0])
+    assert torch.equal(seq["action"], batch["future", "action"][:, 0])
+    assert torch.equal(seq["future", "pixels"][:, 0], batch["future", "pixels"][:, 1])
+    assert "future" not in data.sample(4, torch.Generator().manual_seed(0)).keys()  # noqa: SIM118
+    with pytest.raises(ValueError, match="horizon must lie in"):
+        data.sample(4, horizon=T + 1)

@@ -158,3 +158,22 @@ def test_info_nce_temperature_sharpens():
 def test_bad_settings_are_named(kwargs, match):
     with pytest.raises(ValueError, match=match):
         KINetLoss(make_model(), **kwargs)
+
+
+def test_rollout_loss_trains_the_dynamics_on_the_following_pushes():
+    td = batch()
+    gen = torch.Generator().manual_seed(1)
+    td["future", PIXELS] = torch.randint(
+        0, 256, (4, 2, 16, 16, 3), dtype=torch.uint8, generator=gen
+    )
+    td["future", ACTION] = torch.rand(4, 2, 4, generator=gen) * 2 - 1
+    model = make_model()
+    losses = KINetLoss(model, rollout_weight=1.0)(td)
+    assert losses["loss_rollout"] > 0
+    assert grad_norms(losses["loss_rollout"], model.interaction) > 0
+    assert (
+        grad_norms(losses["loss_rollout"], without(model.detector, model.detector.feat_head)) == 0
+    )
+    assert "loss_rollout" not in KINetLoss(make_model())(td).keys()  # noqa: SIM118
+    with pytest.raises(KeyError, match="trainer.horizon > 1"):
+        KINetLoss(make_model(), rollout_weight=1.0)(batch())

@@ -24,7 +24,16 @@ from kinet_rl.data.storage import (
     episode_array_specs,
     read_json,
 )
-from kinet_rl.keys import ACTION, EPISODE, OBJECT_POS, PIXELS, PIXELS_0, STEP
+from kinet_rl.keys import (
+    ACTION,
+    EPISODE,
+    FUTURE_ACTION,
+    FUTURE_PIXELS,
+    OBJECT_POS,
+    PIXELS,
+    PIXELS_0,
+    STEP,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -126,20 +135,25 @@ class PushDataset:
         """Number of transitions in the split."""
         return self.num_episodes * self.episode_length
 
-    def transitions(self, episode: torch.Tensor, step: torch.Tensor) -> TensorDict:
+    def transitions(
+        self, episode: torch.Tensor, step: torch.Tensor, horizon: int = 1
+    ) -> TensorDict:
         """Transitions at dataset episode indices ``episode`` [B] and push indices ``step`` [B].
 
         Returns:
             TensorDict [B]: ``pixels_0``, ``pixels``, (``next``, ``pixels``) uint8 [B, H, W, 3];
             ``action`` [B, 4]; ``object_pos``, (``next``, ``object_pos``) [B, N, 2];
-            ``episode``, ``step`` int64 [B].
+            ``episode``, ``step`` int64 [B]. With ``horizon`` > 1 (``step + horizon`` within the
+            episode) also the ``horizon - 1`` pushes that follow: (``future``, ``action``)
+            [B, horizon - 1, 4] and the frames after them, (``future``, ``pixels``)
+            [B, horizon - 1, H, W, 3].
         """
         batch, h, n = len(episode), self.image_size, self.num_objects
         times = torch.stack([torch.zeros_like(step), step, step + 1], dim=1)  # [B, 3]
         rows = self._frame_rows(episode[:, None], times)  # [B, 3]
         frames = self._frames.index_select(0, rows.reshape(-1)).view(batch, 3, h, h, 3)
         pos = self._object_pos.index_select(0, rows[:, 1:].reshape(-1)).view(batch, 2, n, 2)
-        return TensorDict(
+        out = TensorDict(
             {
                 PIXELS_0: frames[:, 0],
                 PIXELS: frames[:, 1],
@@ -151,6 +165,17 @@ class PushDataset:
             },
             batch_size=[batch],
         )
+        if horizon > 1:
+            ahead = step[:, None] + torch.arange(1, horizon)  # [B, horizon - 1] push indices
+            frame_rows = self._frame_rows(episode[:, None], ahead + 1).reshape(-1)
+            push_rows = (episode[:, None] * self.episode_length + ahead).reshape(-1)
+            out[FUTURE_PIXELS] = self._frames.index_select(0, frame_rows).view(
+                batch, horizon - 1, h, h, 3
+            )
+            out[FUTURE_ACTION] = self._actions.index_select(0, push_rows).view(
+                batch, horizon - 1, 4
+            )
+        return out
 
     def _frame_rows(self, episode: torch.Tensor, time: torch.Tensor) -> torch.Tensor:
         """Row index of frame ``time`` of ``episode`` in the flattened frame arrays."""
@@ -165,17 +190,25 @@ class PushDataset:
         batch_size: int,
         generator: torch.Generator | None = None,
         steps_per_episode: int = 1,
+        horizon: int = 1,
     ) -> TensorDict:
         """Samples ``batch_size`` transitions uniformly from the split (see :meth:`transitions`).
 
         With ``steps_per_episode`` > 1 the batch holds ``batch_size / steps_per_episode`` random
         episodes with that many distinct random steps each (negatives of a contrastive loss from
-        the same episode).
+        the same episode). With ``horizon`` > 1 every transition also carries the ``horizon - 1``
+        pushes and frames that follow it (a multi-step rollout loss).
         """
+        if not 1 <= horizon <= self.episode_length:
+            raise ValueError(f"horizon must lie in [1, {self.episode_length}], got {horizon}.")
         offsets, step = sample_steps(
-            self.num_episodes, self.episode_length, batch_size, steps_per_episode, generator
+            self.num_episodes,
+            self.episode_length - horizon + 1,
+            batch_size,
+            steps_per_episode,
+            generator,
         )
-        return self.transitions(self.episode_start + offsets, step)
+        return self.transitions(self.episode_start + offsets, step, horizon)
 
     def sample_sequences(
         self, batch_size: int, length: int, generator: torch.Generator | None = None

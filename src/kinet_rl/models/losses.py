@@ -11,7 +11,7 @@ from tensordict import TensorDict, TensorDictBase
 from torch import Tensor
 from torchrl.objectives import LossModule
 
-from kinet_rl.keys import EPISODE
+from kinet_rl.keys import EPISODE, FUTURE_ACTION, FUTURE_PIXELS
 from kinet_rl.models.interaction import graph_similarity
 from kinet_rl.models.world_model import KINetWorldModel
 
@@ -114,6 +114,9 @@ class KINetLoss(LossModule):
             ``"distance"`` (see :func:`graph_logits`).
         ctr_negatives: ``"batch"`` (other samples of the batch) or ``"episode"`` (other timesteps
             of the same episode, as in the paper).
+        rollout_weight: Weight of ``loss_rollout``: the forward loss of the open-loop keypoint
+            rollout over the pushes that follow each transition (0: off; needs batches sampled
+            with ``trainer.horizon > 1``).
     """
 
     def __init__(
@@ -126,6 +129,7 @@ class KINetLoss(LossModule):
         ctr_temperature: float = 1.0,
         ctr_similarity: str = "dot",
         ctr_negatives: str = "batch",
+        rollout_weight: float = 0.0,
     ) -> None:
         super().__init__()
         if ctr_similarity not in CTR_SIMILARITIES:
@@ -140,6 +144,7 @@ class KINetLoss(LossModule):
             fwd_weight=fwd_weight,
             kl_weight=kl_weight,
             ctr_weight=ctr_weight,
+            rollout_weight=rollout_weight,
         )
         self.world_model = world_model
         self.rec_weight = rec_weight
@@ -149,6 +154,7 @@ class KINetLoss(LossModule):
         self.ctr_temperature = ctr_temperature
         self.ctr_similarity = ctr_similarity
         self.ctr_negatives = ctr_negatives
+        self.rollout_weight = rollout_weight
 
     def forward(self, tensordict: TensorDictBase) -> TensorDict:
         """Computes the weighted losses (see class docstring)."""
@@ -174,12 +180,18 @@ class KINetLoss(LossModule):
             )
         else:
             loss_ctr = loss_rec.new_zeros(())
-        return TensorDict(
-            {
-                "loss_rec": self.rec_weight * loss_rec,
-                "loss_fwd": self.fwd_weight * loss_fwd,
-                "loss_kl": self.kl_weight * loss_kl,
-                "loss_ctr": self.ctr_weight * loss_ctr,
-            },
-            batch_size=[],
-        )
+        losses = {
+            "loss_rec": self.rec_weight * loss_rec,
+            "loss_fwd": self.fwd_weight * loss_fwd,
+            "loss_kl": self.kl_weight * loss_kl,
+            "loss_ctr": self.ctr_weight * loss_ctr,
+        }
+        if self.rollout_weight > 0:
+            if out.rollout is None or out.rollout_target is None:
+                raise KeyError(
+                    f"rollout_weight > 0 needs the pushes after each transition ({FUTURE_PIXELS!r}, "
+                    f"{FUTURE_ACTION!r}); sample batches with trainer.horizon > 1."
+                )
+            error = (out.rollout - out.rollout_target).pow(2).sum(dim=(-2, -1))  # [B, H - 1]
+            losses["loss_rollout"] = self.rollout_weight * error.mean()
+        return TensorDict(losses, batch_size=[])

@@ -14,7 +14,17 @@ from tensordict import TensorDictBase
 from torch import Tensor, nn
 
 from kinet_rl.envs.geometry import SceneGeometry
-from kinet_rl.keys import ACTION, KP_FEAT, KP_NODE_EMB, KP_POS, NEXT_PIXELS, PIXELS, PIXELS_0
+from kinet_rl.keys import (
+    ACTION,
+    FUTURE_ACTION,
+    FUTURE_PIXELS,
+    KP_FEAT,
+    KP_NODE_EMB,
+    KP_POS,
+    NEXT_PIXELS,
+    PIXELS,
+    PIXELS_0,
+)
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.models.interaction import GraphPrediction, KeypointInteractionNet
 from kinet_rl.models.keypoints import KeypointDetector, KeypointReconstructor, pixels_to_input
@@ -37,6 +47,9 @@ class TransitionOutputs:
         target: ``[B, H, W, 3]`` ``I_t`` in the same centred space.
         prediction: Interaction-net output from the detached ``x_t``, the features ``phi_t``
             (trained by the forward and contrastive losses) and the action.
+        rollout: ``[B, H - 1, K, 2]`` keypoints predicted open-loop for the pushes after
+            ``u_t`` (from ``x_hat_t+1`` on, features carried over), when the batch has them.
+        rollout_target: ``[B, H - 1, K, 2]`` keypoints detected in those frames (no gradient).
     """
 
     pos: Tensor
@@ -45,6 +58,8 @@ class TransitionOutputs:
     reconstruction: Tensor
     target: Tensor
     prediction: GraphPrediction
+    rollout: Tensor | None = None
+    rollout_target: Tensor | None = None
 
 
 class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
@@ -167,7 +182,25 @@ class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
         target = pixels_to_input(current).permute(0, 2, 3, 1)
         prediction = self.interaction(observed.pos.detach(), observed.feat, action)
         pos, next_pos, next_feat = observed.pos, following_enc.pos, following_enc.feat
-        return TransitionOutputs(pos, next_pos, next_feat, reconstruction, target, prediction)
+        out = TransitionOutputs(pos, next_pos, next_feat, reconstruction, target, prediction)
+        if tensordict.get(FUTURE_PIXELS, None) is not None:
+            out.rollout, out.rollout_target = self._rollout(
+                prediction.next_pos, observed.feat, tensordict
+            )
+        return out
+
+    def _rollout(
+        self, pos: Tensor, feat: Tensor, tensordict: TensorDictBase
+    ) -> tuple[Tensor, Tensor]:
+        """Open-loop keypoints for the batch's future pushes, and the detected ones (targets)."""
+        frames, actions = tensordict.get(FUTURE_PIXELS), tensordict.get(FUTURE_ACTION)
+        with torch.no_grad():
+            target, _ = self.detector(frames)  # [B, H - 1, K, 2]
+        steps = []
+        for h in range(actions.shape[1]):
+            pos = self.interaction(pos, feat, actions[:, h]).next_pos
+            steps.append(pos)
+        return torch.stack(steps, dim=1), target
 
     @torch.no_grad()
     def predict_pixels(self, pixels_0: Tensor, pos: Tensor) -> Tensor:

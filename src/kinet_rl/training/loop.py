@@ -28,8 +28,10 @@ class TransitionSampler(Protocol):
         batch_size: int,
         generator: torch.Generator | None = None,
         steps_per_episode: int = 1,
+        horizon: int = 1,
     ) -> TensorDictBase:
-        """Returns a ``[batch_size]`` TensorDict of transitions, ``steps_per_episode`` per episode."""
+        """A ``[batch_size]`` TensorDict of transitions (``steps_per_episode`` per episode, each
+        with the ``horizon - 1`` pushes that follow); samplers may omit the two options."""
         ...
 
 
@@ -53,6 +55,7 @@ class TrainerSettings:
         seed: seed of batch sampling (each process adds its rank).
         steps_per_episode: transitions drawn from each sampled episode (> 1 gives a contrastive
             loss negatives from the same episode).
+        horizon: pushes each training transition carries (> 1 for a multi-step rollout loss).
     """
 
     steps: int = 2000
@@ -65,6 +68,7 @@ class TrainerSettings:
     val_batches: int = 8
     seed: int = 0
     steps_per_episode: int = 1
+    horizon: int = 1
 
 
 Validator = Callable[[int], dict[str, float]]
@@ -147,10 +151,9 @@ class Trainer:
 
     def _batch(self, data: TransitionSampler) -> TensorDictBase:
         s = self.settings
-        if s.steps_per_episode == 1:
-            return data.sample(s.batch_size, self.generator).to(self.ctx.device)
-        batch = data.sample(s.batch_size, self.generator, steps_per_episode=s.steps_per_episode)
-        return batch.to(self.ctx.device)
+        options = {"steps_per_episode": s.steps_per_episode, "horizon": s.horizon}
+        extra = {name: value for name, value in options.items() if value != 1}  # plain samplers
+        return data.sample(s.batch_size, self.generator, **extra).to(self.ctx.device)
 
     def train_step(self) -> TensorDictBase:
         """One optimiser step; returns the detached loss terms."""
