@@ -74,6 +74,27 @@ class ExperimentSettings:
     model_config: Mapping[str, Any] = field(default_factory=dict)
     loss_config: Mapping[str, Any] = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        loss = self.loss_config
+        if (
+            loss.get("ctr_negatives") == "episode"
+            and loss.get("ctr_weight", 0) > 0
+            and self.trainer.steps_per_episode < 2
+        ):
+            raise ValueError(
+                "loss.ctr_negatives=episode takes its negatives from other steps of the same "
+                f"episode, but trainer.steps_per_episode={self.trainer.steps_per_episode} samples "
+                "one step per episode (the contrastive loss would be 0); set "
+                "trainer.steps_per_episode=4 (or another divisor of the batch size) or "
+                "loss.ctr_negatives=batch."
+            )
+        if loss.get("rollout_weight", 0) > 0 and self.trainer.horizon < 2:
+            raise ValueError(
+                "loss.rollout_weight > 0 trains on the pushes after each transition, but "
+                f"trainer.horizon={self.trainer.horizon}; set trainer.horizon=3 (or more) or "
+                "loss.rollout_weight=0."
+            )
+
     @classmethod
     def from_container(cls, cfg: Mapping[str, Any]) -> ExperimentSettings:
         """Settings from a resolved plain-container config (``conf/config.yaml``'s layout)."""

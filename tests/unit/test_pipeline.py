@@ -59,3 +59,13 @@ def test_a_checkpoint_stores_its_scene_as_typed_data(tmp_path):
     assert checkpoint_scene(tmp_path / "without.pt") is None
     state = torch.load(tmp_path / "with.pt", weights_only=True)
     assert "config" not in state and state["scene"] == scene.as_dict()
+
+
+def test_episode_negatives_without_grouped_batches_are_refused_before_work():
+    with pytest.raises(ValueError, match="trainer.steps_per_episode=1 samples one step"):
+        settings_of("trainer.steps_per_episode=1")
+    settings_of("trainer.steps_per_episode=1", "loss.ctr_negatives=batch")
+    settings_of("+exp=blocks_topview_no_ctr", "trainer.steps_per_episode=1")  # no contrastive term
+    with pytest.raises(ValueError, match="trainer.horizon=1"):
+        settings_of("loss.rollout_weight=1.0")
+    assert settings_of("loss.rollout_weight=1.0", "trainer.horizon=3").trainer.horizon == 3
