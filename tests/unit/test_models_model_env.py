@@ -79,9 +79,9 @@ def test_step_reward_matches_the_definition(reward, tiny_kinet, random_images) -
     with torch.no_grad():
         pred = model.interaction(state[KP_POS], state[KP_FEAT], action)
         pred_nodes = model.interaction.embed_nodes(pred.next_pos, state[KP_FEAT])
-    if reward is GraphSimilarityReward:
-        k = model.config["num_keypoints"]
-        expected = graph_similarity(pred.next_nodes, state[GOAL_KP_NODE_EMB]) / k
+    if reward is GraphSimilarityReward:  # cosine of the flattened graphs (the default)
+        a, b = pred.next_nodes.flatten(-2), state[GOAL_KP_NODE_EMB].flatten(-2)
+        expected = (a * b).sum(-1) / (a.norm(dim=-1) * b.norm(dim=-1))
     elif reward is GraphDistanceReward:
         expected = -(pred_nodes - state[GOAL_KP_NODE_EMB]).pow(2).sum(-1).mean(-1)
     else:
@@ -89,6 +89,21 @@ def test_step_reward_matches_the_definition(reward, tiny_kinet, random_images) -
     assert torch.allclose(out["reward"], expected.unsqueeze(-1), atol=1e-5)
     assert torch.allclose(out[KP_POS], pred.next_pos, atol=1e-6)
     assert torch.equal(out[GOAL_KP_NODE_EMB], state[GOAL_KP_NODE_EMB])  # goal carried along
+
+
+def test_the_papers_dot_product_similarity_is_available(tiny_kinet, random_images) -> None:
+    model = tiny_kinet()
+    env = KINetModelEnv(model, reward=GraphSimilarityReward("dot"))
+    state = env.observe(random_images((3,), 0), random_images((), 1))
+    action = torch.rand(3, 4) * 2 - 1
+    out = env.step(state.clone().set(ACTION, action))["next"]
+    with torch.no_grad():
+        pred = model.interaction(state[KP_POS], state[KP_FEAT], action)
+    k = model.config["num_keypoints"]
+    expected = graph_similarity(pred.next_nodes, state[GOAL_KP_NODE_EMB]) / k
+    assert torch.allclose(out["reward"], expected.unsqueeze(-1), atol=1e-5)
+    with pytest.raises(ValueError, match="similarity='l1'"):
+        GraphSimilarityReward("l1")
 
 
 @pytest.mark.parametrize("reward", REWARD_CLASSES)

@@ -12,7 +12,8 @@ from kinet_rl.rearrangement.settings import DEFAULT_METHODS, Condition, Rearrang
 def test_every_method_is_declared_once_with_a_label() -> None:
     assert set(DEFAULT_METHODS) < set(METHODS) and "model_mpc" in METHODS
     assert all(name == method.name and method.label for name, method in METHODS.items())
-    assert [m.name for m in METHODS.values() if m.graph] == ["kinet_graph", "kinet_graph_distance"]
+    graph = [m.name for m in METHODS.values() if m.graph]
+    assert graph == ["kinet_graph", "kinet_graph_dot", "kinet_graph_distance"]
     assert {m.name for m in METHODS.values() if m.needs is None} == {"random", "oracle"}
 
 

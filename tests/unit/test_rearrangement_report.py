@@ -20,7 +20,7 @@ def test_markdown_lists_methods_and_the_generalization_table() -> None:
     }
     labels = {name: METHODS[name].label for name in ("kinet_graph", "random")}
     text = markdown(RearrangementResults(settings, episodes, labels), "plot.png")
-    assert "| KINet-GraphMPC (paper S) | 1 | 80.0 | 12.0 ± 0.0 | 100% |" in text
+    assert "| KINet-GraphMPC (paper S, cosine) | 1 | 80.0 | 12.0 ± 0.0 | 100% |" in text
     assert "| 1 | 12.0 ± 0.0 (80.0) |" in text and "| 2 | - |" in text
     assert "![distance to goal](plot.png)" in text
 

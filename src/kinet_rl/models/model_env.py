@@ -8,6 +8,7 @@ from __future__ import annotations
 from typing import Protocol
 
 import torch
+import torch.nn.functional as F
 from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModule
 from torch import Tensor, nn
@@ -56,17 +57,31 @@ class KINetReward(Protocol):
 
 
 class GraphSimilarityReward:
-    """GraphMPC's objective ``S(G_pred, G_goal) / K`` (paper Sec. 3.4).
+    """GraphMPC's objective: the similarity ``S`` of the predicted next graph to the goal graph.
 
-    ``S`` sums the dot products of matching node embeddings (keypoint ``k`` of the prediction
-    against keypoint ``k`` of the goal image: the detector's keypoint channels are consistent
-    across images). The prediction's embeddings are the interaction net's predicted next nodes,
-    the goal's are ``embed_nodes`` of the goal keypoints: the pair the contrastive loss aligns.
-    Dividing by ``K`` only rescales (it matters for MPPI's temperature, not for CEM).
+    ``S`` compares matching node embeddings (keypoint ``k`` of the prediction against keypoint
+    ``k`` of the goal image: the detector's keypoint channels are consistent across images). The
+    prediction's embeddings are the interaction net's predicted next nodes, the goal's are
+    ``embed_nodes`` of the goal keypoints: the pair the contrastive loss aligns. With
+    ``similarity="dot"`` it is the paper's ``S / K = (1/K) sum_k n_k . n_goal_k`` (unbounded: a
+    candidate can raise it by inflating its embeddings along the goal's); ``"cosine"`` (default)
+    is the cosine of the two flattened graphs, the bounded logit the contrastive loss trains
+    (``loss.ctr_similarity=cosine``, paper Sec. 3.4-3.5 with normalised embeddings).
+
+    Args:
+        similarity: ``"cosine"`` or ``"dot"``; use the one the model's contrastive loss used.
     """
 
+    def __init__(self, similarity: str = "cosine") -> None:
+        if similarity not in ("cosine", "dot"):
+            raise ValueError(f"similarity={similarity!r}; choose 'cosine' or 'dot'.")
+        self.similarity = similarity
+
     def __call__(self, interaction, prediction, feat, goal_nodes, goal_pos) -> Tensor:
-        return graph_similarity(prediction.next_nodes, goal_nodes) / goal_nodes.shape[-2]
+        nodes = prediction.next_nodes
+        if self.similarity == "dot":
+            return graph_similarity(nodes, goal_nodes) / goal_nodes.shape[-2]
+        return F.cosine_similarity(nodes.flatten(-2), goal_nodes.flatten(-2), dim=-1)
 
 
 class GraphDistanceReward:

@@ -85,7 +85,7 @@ class Method:
         return self.make_controller(ctx)
 
 
-def _kinet(reward: type[KINetReward]) -> Callable[[MethodContext], Controller]:
+def _kinet(reward: Callable[[], KINetReward]) -> Callable[[MethodContext], Controller]:
     def make(ctx: MethodContext) -> Controller:
         half_size = workspace_for(ctx.scene.task).half_size
         planner = PushPlanner(
@@ -108,9 +108,16 @@ METHODS: dict[str, Method] = {
     for method in (
         Method(
             "kinet_graph",
-            "KINet-GraphMPC (paper S)",
+            "KINet-GraphMPC (paper S, cosine)",
             "kinet",
             _kinet(GraphSimilarityReward),
+            graph=True,
+        ),
+        Method(
+            "kinet_graph_dot",
+            "KINet-GraphMPC (paper S, dot product)",
+            "kinet",
+            _kinet(lambda: GraphSimilarityReward("dot")),
             graph=True,
         ),
         Method(
