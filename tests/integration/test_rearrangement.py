@@ -152,3 +152,27 @@ def test_evaluate_entry_point_composes_eval_group(tmp_path: Path, tiny_kinet, co
     summary = evaluate(cfg, tmp_path)["summary"]
     assert set(summary) == {"comparison", "n1_geom_train"}
     assert (tmp_path / "rearrangement" / "rearrangement.md").is_file()
+
+
+def test_image_controllers_are_never_handed_ground_truth(monkeypatch, tiny_kinet) -> None:
+    """Every KINet method's controller sees only ``pixels``; the GT-state oracle sees positions."""
+    from kinet_rl.keys import OBJECT_POS, PIXELS
+    from kinet_rl.rearrangement.controllers import KINetController
+    from kinet_rl.rearrangement.methods import METHODS
+    from kinet_rl.rearrangement.runner import Job, run_job
+
+    seen: list[set[str]] = []
+    act = KINetController.act
+    monkeypatch.setattr(
+        KINetController, "act", lambda self, obs: seen.append(set(obs)) or act(self, obs)
+    )
+    settings = RearrangementSettings(
+        scene=SceneSettings(image_size=32), task=TaskSettings(num_steps=2), workers=1, videos=0,
+        planner={"planning_horizon": 1, "optim_steps": 1, "num_candidates": 8, "top_k": 2},
+    )  # fmt: skip
+    condition = settings.conditions(generalization=False)[0]
+    kinet_methods = [name for name, method in METHODS.items() if method.needs == "kinet"]
+    for name in kinet_methods:
+        run_job(Job(condition, name, 10_000, False), settings, tiny_kinet())
+    assert seen == [{PIXELS}] * (2 * len(kinet_methods))
+    assert METHODS["oracle"].observes == (OBJECT_POS,) and METHODS["random"].observes == ()

@@ -52,3 +52,10 @@ def test_conditions_compare_by_value_so_worker_results_find_theirs() -> None:
     assert condition("comparison") == condition("comparison")
     assert len({condition("comparison"), condition("comparison")}) == 1
     assert condition("generalization") != condition("comparison")
+
+
+def test_methods_that_plan_from_images_observe_only_images() -> None:
+    for method in METHODS.values():
+        if method.needs == "kinet":
+            assert method.observes == ("pixels",), method.name
+    assert "object_pos" in METHODS["model_mpc"].observes  # IN/VisIN: GT-state ceilings

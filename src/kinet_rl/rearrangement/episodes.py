@@ -105,18 +105,22 @@ def run_episode(
     task: TaskSettings,
     record: bool = False,
     on_step: Callable[[int], None] | None = None,
+    observes: tuple[str, ...] | None = None,
 ) -> EpisodeResult:
     """Runs ``task.num_steps`` pushes of ``controller`` from the episode's start.
 
     An unstable simulation ends the episode early; its last distance is carried to ``T``.
-    With ``record`` the frames and (for KINet controllers) detected keypoints are kept.
+    With ``record`` the frames and (for KINet controllers) detected keypoints are kept. With
+    ``observes`` the controller is handed only those observation entries (e.g. ``("pixels",)``:
+    no ground truth reaches a controller that plans from images).
     """
     obs = episode.start
     distances = [mean_goal_distance(obs[OBJECT_POS], episode.goal_pos)]
     result = EpisodeResult(method, episode.seed, np.zeros(0), False, False)
     controller.reset(episode)
     for step in range(task.num_steps):
-        action = np.clip(np.asarray(controller.act(obs), dtype=np.float32), -1.0, 1.0)
+        seen = obs if observes is None else {key: obs[key] for key in observes}
+        action = np.clip(np.asarray(controller.act(seen), dtype=np.float32), -1.0, 1.0)
         if record:
             _record(result, controller, obs)
         obs = episode.env.step(action).observation

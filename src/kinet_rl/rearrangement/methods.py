@@ -16,6 +16,7 @@ from torch import nn
 
 from kinet_rl.envs.settings import SceneSettings
 from kinet_rl.envs.workspace import workspace_for
+from kinet_rl.keys import OBJECT_POS, PIXELS
 from kinet_rl.models.model_env import (
     GraphDistanceReward,
     GraphSimilarityReward,
@@ -34,6 +35,8 @@ from kinet_rl.rearrangement.episodes import Controller
 from kinet_rl.rearrangement.settings import Condition, RearrangementSettings
 
 ModelKind = Literal["kinet", "baseline"] | None
+#: What a camera gives: the observation of every controller that plans from images.
+IMAGES = (PIXELS,)
 
 
 @dataclass(frozen=True)
@@ -55,6 +58,9 @@ class Method:
         label: How reports and tables name it.
         needs: The model it plans with (see the module docstring).
         make_controller: Builds its controller for one episode.
+        observes: The observation entries its controller is handed each step: learned-model
+            controllers see only what a real robot's camera gives (``pixels``); the GT-state
+            baselines and the oracle also get ``object_pos``.
         graph: Whether it plans on KINet's goal graph (it may then be ``kinet_method``).
     """
 
@@ -62,6 +68,7 @@ class Method:
     label: str
     needs: ModelKind
     make_controller: Callable[[MethodContext], Controller]
+    observes: tuple[str, ...]
     graph: bool = False
 
     def check_model(self, model: nn.Module | None) -> None:
@@ -111,6 +118,7 @@ METHODS: dict[str, Method] = {
             "KINet-GraphMPC (paper S, cosine)",
             "kinet",
             _kinet(GraphSimilarityReward),
+            IMAGES,
             graph=True,
         ),
         Method(
@@ -118,6 +126,7 @@ METHODS: dict[str, Method] = {
             "KINet-GraphMPC (paper S, dot product)",
             "kinet",
             _kinet(lambda: GraphSimilarityReward("dot")),
+            IMAGES,
             graph=True,
         ),
         Method(
@@ -125,18 +134,26 @@ METHODS: dict[str, Method] = {
             "KINet-GraphMPC (embedding distance)",
             "kinet",
             _kinet(GraphDistanceReward),
+            IMAGES,
             graph=True,
         ),
         Method(
-            "kinet_keypoints", "MPC on keypoint positions", "kinet", _kinet(KeypointChamferReward)
+            "kinet_keypoints",
+            "MPC on keypoint positions",
+            "kinet",
+            _kinet(KeypointChamferReward),
+            IMAGES,
         ),
-        Method("random", "Random pushes", None, lambda ctx: RandomController(ctx.seed)),
-        Method("oracle", "Oracle MPC (GT state, analytic push model)", None, _oracle),
+        Method("random", "Random pushes", None, lambda ctx: RandomController(ctx.seed), ()),
+        Method(
+            "oracle", "Oracle MPC (GT state, analytic push model)", None, _oracle, (OBJECT_POS,)
+        ),
         Method(
             "model_mpc",
             "Baseline model MPC (distance to goal)",
             "baseline",
             lambda ctx: BaselineMPCController(ctx.model, ctx.settings.planner, ctx.seed),
+            (PIXELS, OBJECT_POS),  # IN/VisIN plan on GT positions (Forw/ForwInv use pixels only)
         ),
     )
 }

@@ -65,9 +65,16 @@ def run_job(
     scene = job.condition.scene
     episode = make_episode(scene, settings.task, job.seed)
     try:
-        context = MethodContext(model, scene, settings, job.seed)
-        controller = METHODS[job.method].controller(context)
-        return run_episode(episode, controller, job.method, settings.task, record=job.record)
+        method = METHODS[job.method]
+        controller = method.controller(MethodContext(model, scene, settings, job.seed))
+        return run_episode(
+            episode,
+            controller,
+            job.method,
+            settings.task,
+            record=job.record,
+            observes=method.observes,
+        )
     finally:
         episode.close()
 
