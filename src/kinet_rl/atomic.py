@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import pickle
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
@@ -64,6 +65,14 @@ def atomic_torch_save(obj: Any, path: str | os.PathLike) -> None:
     atomic_save_with(path, lambda f: torch.save(obj, f))
 
 
+def _corrupt(path: Path, err: Exception) -> CheckpointError:
+    return CheckpointError(
+        f"Checkpoint {path} is corrupt or truncated and could not be read safely "
+        f"({type(err).__name__} from torch.load with weights_only=True); delete it (a training run then starts afresh) or point to "
+        "another checkpoint."
+    )
+
+
 def safe_torch_load(
     path: str | os.PathLike, required: tuple[str, ...] = (), writer: str = "kinet_rl"
 ) -> dict[str, Any]:
@@ -84,11 +93,17 @@ def safe_torch_load(
         )
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as err:
+        if "Unsupported global" not in str(err):  # garbage bytes, not a foreign object
+            raise _corrupt(path, err) from None
+        raise CheckpointError(  # objects that weights_only=True refuses to build
+            f"Checkpoint {path} holds Python objects that cannot be loaded safely (kinet_rl "
+            "loads checkpoints with weights_only=True and never runs code from a file); it was "
+            "not written by kinet_rl or it was altered. Re-create it with save_checkpoint from a "
+            "trusted source, or delete it (a training run then starts afresh)."
+        ) from None
     except Exception as err:  # torch raises several types for truncated or corrupt files
-        raise CheckpointError(
-            f"Checkpoint {path} is corrupt or truncated ({type(err).__name__}: {err}); "
-            "delete it (a training run then starts afresh) or point to another checkpoint."
-        ) from err
+        raise _corrupt(path, err) from None
     if not isinstance(state, dict) or any(key not in state for key in required):
         raise CheckpointError(
             f"Checkpoint {path} lacks the entries {list(required)}; it was not written by {writer}."

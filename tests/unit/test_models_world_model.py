@@ -169,3 +169,29 @@ def test_checkpoint_foreign_or_edited_file_is_refused(model, tmp_path):
     torch.save({**state, "format": "other/2"}, path)
     with pytest.raises(CheckpointError, match="has format"):
         KINetWorldModel.from_checkpoint(path)
+
+
+class _Foreign:
+    """A pickled object that ``weights_only=True`` refuses to build."""
+
+
+def test_a_checkpoint_with_code_is_refused_without_advice_to_run_it(tmp_path) -> None:
+    path = tmp_path / "hostile.pt"
+    torch.save({"format": "x", "payload": _Foreign()}, path)
+    with pytest.raises(CheckpointError, match="cannot be loaded safely") as info:
+        KINetWorldModel.from_checkpoint(path)
+    text = str(info.value)
+    assert str(path) in text and "weights_only=True" in text
+    assert "weights_only=False" not in text and "set to `False`" not in text
+    assert info.value.__cause__ is None  # torch's own advice is not chained either
+
+
+def test_a_corrupt_checkpoint_error_names_the_file_and_gives_no_unsafe_advice(tmp_path) -> None:
+    path = tmp_path / "garbage.pt"
+    path.write_bytes(b"not a checkpoint" * 10)
+    with pytest.raises(
+        CheckpointError, match="corrupt or truncated and could not be read safely"
+    ) as info:
+        KINetWorldModel.from_checkpoint(path)
+    assert str(path) in str(info.value) and "delete it" in str(info.value)
+    assert "weights_only=False" not in str(info.value) and info.value.__cause__ is None
