@@ -15,7 +15,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from kinet_rl.atomic import atomic_save_with
+from kinet_rl.evaluation.images import save_line_plot
 from kinet_rl.rearrangement.methods import METHODS
 from kinet_rl.rearrangement.report import plot_curves
 from kinet_rl.rearrangement.settings import generalization_key
@@ -246,15 +246,9 @@ def plot_learning_curves(runs: Mapping[str, Sequence[Path]], path: Path, title: 
                 steps, errors = zip(*curve, strict=True)
                 label_once = label if j == 0 else None
                 ax.plot(steps, errors, "o-", ms=3, color=f"C{i}", alpha=0.8, label=label_once)
-    ax.set_xlabel("training step")
-    ax.set_ylabel("1-push validation forward error [mm]")
-    ax.set_title(title)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    atomic_save_with(path, lambda f: fig.savefig(f, format="png", dpi=120))
-    plt.close(fig)
-    return path
+    return save_line_plot(
+        fig, ax, path, "training step", "1-push validation forward error [mm]", title
+    )
 
 
 def plot_mpc_curves(mpc: Mapping[str, Mapping[str, Any]], path: Path) -> Path:

@@ -71,3 +71,18 @@ def upscale(image: Tensor | np.ndarray, scale: int) -> np.ndarray:
 def save_png(image: np.ndarray, path: str | os.PathLike) -> Path:
     """Writes a PNG atomically and returns its path."""
     return atomic_save_with(path, lambda f: Image.fromarray(image).save(f, format="PNG"))
+
+
+def save_line_plot(fig, ax, path: Path, xlabel: str, ylabel: str, title: str) -> Path:
+    """Labels, grid and legend of a matplotlib line plot; saves it atomically as PNG and closes it."""
+    import matplotlib.pyplot as plt
+
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    atomic_save_with(path, lambda f: fig.savefig(f, format="png", dpi=120))
+    plt.close(fig)
+    return path

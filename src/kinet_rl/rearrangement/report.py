@@ -9,9 +9,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from kinet_rl.atomic import atomic_save_with, atomic_write, atomic_write_json, atomic_write_text
+from kinet_rl.atomic import atomic_write, atomic_write_json, atomic_write_text
 from kinet_rl.envs.geometry import normalised_to_pixels
-from kinet_rl.evaluation.images import draw_keypoints, image_grid, upscale
+from kinet_rl.evaluation.images import draw_keypoints, image_grid, save_line_plot, upscale
 from kinet_rl.rearrangement.results import EpisodeResult, RearrangementResults
 
 VIDEO_SCALE = 4
@@ -33,15 +33,7 @@ def plot_curves(
         steps = np.arange(len(mean))
         ax.plot(steps, mean, label=f"{labels.get(method, method)} (n={stats['episodes']})")
         ax.fill_between(steps, mean - sem, mean + sem, alpha=0.2)
-    ax.set_xlabel("push t")
-    ax.set_ylabel("mean object distance to goal [mm]")
-    ax.set_title(title)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    atomic_save_with(path, lambda f: fig.savefig(f, format="png", dpi=120))
-    plt.close(fig)
-    return path
+    return save_line_plot(fig, ax, path, "push t", "mean object distance to goal [mm]", title)
 
 
 def markdown(results: RearrangementResults, plot_name: str) -> str:
