@@ -21,13 +21,19 @@ from kinet_rl.models import (
     GraphDistanceReward,
     GraphSimilarityReward,
     KeypointChamferReward,
+    KeypointL2Reward,
     KINetModelEnv,
     chamfer_distance,
     graph_similarity,
 )
 from kinet_rl.planners import GraphMPCPlanner, StateModelEnv
 
-REWARD_CLASSES = [GraphSimilarityReward, GraphDistanceReward, KeypointChamferReward]
+REWARD_CLASSES = [
+    GraphSimilarityReward,
+    GraphDistanceReward,
+    KeypointChamferReward,
+    KeypointL2Reward,
+]
 
 
 def test_chamfer_distance_values_and_permutation_invariance() -> None:
@@ -42,6 +48,7 @@ def test_rewards_by_command_line_name() -> None:
         "graph": GraphSimilarityReward,
         "graph_distance": GraphDistanceReward,
         "keypoints": KeypointChamferReward,
+        "keypoints_l2": KeypointL2Reward,
     } == REWARDS
 
 
@@ -84,6 +91,8 @@ def test_step_reward_matches_the_definition(reward, tiny_kinet, random_images) -
         expected = (a * b).sum(-1) / (a.norm(dim=-1) * b.norm(dim=-1))
     elif reward is GraphDistanceReward:
         expected = -(pred_nodes - state[GOAL_KP_NODE_EMB]).pow(2).sum(-1).mean(-1)
+    elif reward is KeypointL2Reward:  # keypoint k against goal keypoint k
+        expected = -(pred.next_pos - state[GOAL_KP_POS]).norm(dim=-1).pow(2).mean(-1)
     else:
         expected = -chamfer_distance(pred.next_pos, state[GOAL_KP_POS])
     assert torch.allclose(out["reward"], expected.unsqueeze(-1), atol=1e-5)

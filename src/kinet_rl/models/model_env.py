@@ -108,11 +108,24 @@ class KeypointChamferReward:
         return -chamfer_distance(prediction.next_pos, goal_pos)
 
 
+class KeypointL2Reward:
+    """MPC on index-matched keypoint positions: minus the mean over keypoints of ``|x_k - g_k|^2``.
+
+    Keypoint ``k`` of the prediction is compared with keypoint ``k`` of the goal image (the
+    correspondence the graph rewards rely on), without any embedding: the control that shows what
+    the graph embedding adds to GraphMPC.
+    """
+
+    def __call__(self, interaction, prediction, feat, goal_nodes, goal_pos) -> Tensor:
+        return -(prediction.next_pos - goal_pos).pow(2).sum(-1).mean(-1)
+
+
 #: The rewards by their command-line names (``python -m kinet_rl.plan --reward``).
 REWARDS: dict[str, type[KINetReward]] = {
     "graph": GraphSimilarityReward,
     "graph_distance": GraphDistanceReward,
     "keypoints": KeypointChamferReward,
+    "keypoints_l2": KeypointL2Reward,
 }
 
 

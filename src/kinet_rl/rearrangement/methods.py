@@ -21,6 +21,7 @@ from kinet_rl.models.model_env import (
     GraphDistanceReward,
     GraphSimilarityReward,
     KeypointChamferReward,
+    KeypointL2Reward,
     KINetReward,
 )
 from kinet_rl.models.push_planner import PushPlanner
@@ -142,6 +143,13 @@ METHODS: dict[str, Method] = {
             "MPC on keypoint positions",
             "kinet",
             _kinet(KeypointChamferReward),
+            IMAGES,
+        ),
+        Method(
+            "kinet_keypoints_l2",
+            "MPC on index-matched keypoint positions (L2)",
+            "kinet",
+            _kinet(KeypointL2Reward),
             IMAGES,
         ),
         Method("random", "Random pushes", None, lambda ctx: RandomController(ctx.seed), ()),
