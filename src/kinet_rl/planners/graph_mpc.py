@@ -28,7 +28,10 @@ class GraphMPCPlanner(MPCPlannerBase):
     ``batch_locked=False``, e.g. a :class:`~torchrl.envs.model_based.ModelBasedEnvBase`), scores
     each by the sum of ``reward_key`` over the horizon (rewards after the first ``done`` are not
     counted) and refits the Gaussian to the ``top_k`` elites, ``optim_steps`` times. The first
-    action of the final mean is returned.
+    action of the final mean is returned, or with ``return_best`` that of the best sequence
+    scored in any iteration (the elite mean can average pushes of different modes into one that
+    touches nothing). With ``keep_elites`` > 0 the best sequences of an iteration are scored again
+    in the next instead of as many fresh samples (iCEM, Pinneri et al. 2020).
 
     Update rules:
         ``"cem"``: elites weighted equally (cross-entropy method).
@@ -64,6 +67,8 @@ class GraphMPCPlanner(MPCPlannerBase):
         min_std: Floor of the sampling standard deviation.
         max_std: Ceiling of the sampling standard deviation, and its value at the first iteration.
         warm_start: Start from the previous plan shifted by one step.
+        return_best: Return (and warm-start from) the best sequence scored instead of the mean.
+        keep_elites: Elites carried into the next iteration's candidates (0: none).
         reward_key: Reward read after each imagined step.
         action_key: Where the planned action is written.
         generator: Optional RNG for sampling.
@@ -81,6 +86,8 @@ class GraphMPCPlanner(MPCPlannerBase):
         min_std: float = 0.05,
         max_std: float = 1.0,
         warm_start: bool = True,
+        return_best: bool = False,
+        keep_elites: int = 0,
         reward_key: NestedKey = REWARD,
         action_key: NestedKey = ACTION,
         generator: torch.Generator | None = None,
@@ -95,6 +102,10 @@ class GraphMPCPlanner(MPCPlannerBase):
             min_std=min_std,
             max_std=max_std,
         )
+        if not 0 <= keep_elites <= min(top_k, num_candidates - 1):
+            raise ValueError(
+                f"keep_elites must lie in [0, min(top_k, num_candidates - 1)], got {keep_elites}."
+            )
         super().__init__(env=env, action_key=action_key)
         self.planning_horizon = planning_horizon
         self.optim_steps = optim_steps
@@ -105,6 +116,8 @@ class GraphMPCPlanner(MPCPlannerBase):
         self.min_std = min_std
         self.max_std = max_std
         self.warm_start = warm_start
+        self.return_best = return_best
+        self.keep_elites = keep_elites
         self.reward_key = reward_key
         self.generator = generator
         self._env_action_key = env.action_key
@@ -142,6 +155,10 @@ class GraphMPCPlanner(MPCPlannerBase):
             .clone()
         )  # [*B, N]
         n_event = 1 + len(self._action_shape)  # T and action dims
+        dim = len(batch_shape)  # the candidate dim
+        kept: Tensor | None = None  # [*B, keep, T, *A] elites carried over (iCEM)
+        best_return = torch.full(batch_shape, -math.inf, device=mean.device, dtype=mean.dtype)
+        best = mean.squeeze(dim).clone()  # [*B, T, *A]
         for _ in range(self.optim_steps):
             noise = torch.randn(
                 (*batch_shape, self.num_candidates, *mean.shape[-n_event:]),
@@ -150,18 +167,32 @@ class GraphMPCPlanner(MPCPlannerBase):
                 dtype=mean.dtype,
             )
             actions = self._clamp(mean + std * noise)  # [*B, N, T, *A]
+            if kept is not None:
+                actions = torch.cat(
+                    [
+                        kept,
+                        actions.narrow(dim, kept.shape[dim], self.num_candidates - kept.shape[dim]),
+                    ],
+                    dim,
+                )
             returns = self.rollout_returns(start, actions)  # [*B, N]
             weights, elite_idx = self._elite_weights(returns)  # [*B, k]
             index = elite_idx.reshape(*elite_idx.shape, *([1] * n_event))
             index = index.expand(*elite_idx.shape, *mean.shape[-n_event:])
-            elites = actions.gather(len(batch_shape), index)  # [*B, k, T, *A]
+            elites = actions.gather(dim, index)  # [*B, k, T, *A], best first
+            if self.keep_elites:
+                kept = elites.narrow(dim, 0, self.keep_elites)
+            top = returns.gather(-1, elite_idx.narrow(-1, 0, 1)).squeeze(-1)  # [*B]
+            better = (top > best_return).reshape(*batch_shape, *([1] * n_event))
+            best = torch.where(better, elites.select(dim, 0), best)
+            best_return = torch.maximum(best_return, top)
             weights = weights.reshape(*elite_idx.shape, *([1] * n_event))
-            mean = (weights * elites).sum(len(batch_shape), keepdim=True)
-            var = (weights * (elites - mean).pow(2)).sum(len(batch_shape), keepdim=True)
+            mean = (weights * elites).sum(dim, keepdim=True)
+            var = (weights * (elites - mean).pow(2)).sum(dim, keepdim=True)
             std = var.sqrt().clamp(self.min_std, self.max_std)
-        plan = mean.squeeze(len(batch_shape))  # [*B, T, *A]
+        plan = best if self.return_best else mean.squeeze(dim)  # [*B, T, *A]
         self._prev_mean = plan.clone()
-        return plan.select(len(batch_shape), 0)
+        return plan.select(dim, 0)
 
     def rollout_returns(self, start: TensorDictBase, actions: Tensor) -> Tensor:
         """Sums rewards of imagined rollouts, ignoring rewards after the first ``done``.
