@@ -10,7 +10,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor, nn
 
-ACTION_DIM = 4
+from kinet_rl.planners.model_env import ACTION_DIM
+
 #: Frames in which the push's points enter the node update (see :class:`KeypointInteractionNet`).
 ACTION_FRAMES = ("table", "learned")
 

@@ -158,7 +158,7 @@ class GraphMPCPlanner(MPCPlannerBase):
         dim = len(batch_shape)  # the candidate dim
         kept: Tensor | None = None  # [*B, keep, T, *A] elites carried over (iCEM)
         best_return = torch.full(batch_shape, -math.inf, device=mean.device, dtype=mean.dtype)
-        best = mean.squeeze(dim).clone()  # [*B, T, *A]
+        best = mean.squeeze(dim)  # [*B, T, *A] best sequence scored (return_best only)
         for _ in range(self.optim_steps):
             noise = torch.randn(
                 (*batch_shape, self.num_candidates, *mean.shape[-n_event:]),
@@ -182,10 +182,11 @@ class GraphMPCPlanner(MPCPlannerBase):
             elites = actions.gather(dim, index)  # [*B, k, T, *A], best first
             if self.keep_elites:
                 kept = elites.narrow(dim, 0, self.keep_elites)
-            top = returns.gather(-1, elite_idx.narrow(-1, 0, 1)).squeeze(-1)  # [*B]
-            better = (top > best_return).reshape(*batch_shape, *([1] * n_event))
-            best = torch.where(better, elites.select(dim, 0), best)
-            best_return = torch.maximum(best_return, top)
+            if self.return_best:
+                top = returns.gather(-1, elite_idx.narrow(-1, 0, 1)).squeeze(-1)  # [*B]
+                better = (top > best_return).reshape(*batch_shape, *([1] * n_event))
+                best = torch.where(better, elites.select(dim, 0), best)
+                best_return = torch.maximum(best_return, top)
             weights = weights.reshape(*elite_idx.shape, *([1] * n_event))
             mean = (weights * elites).sum(dim, keepdim=True)
             var = (weights * (elites - mean).pow(2)).sum(dim, keepdim=True)
