@@ -57,6 +57,7 @@ from kinet_rl.pipeline import (
     run_experiment,
 )
 from kinet_rl.rearrangement import RearrangementSettings
+from kinet_rl.rearrangement.report import budget_text
 
 logger = logging.getLogger(__name__)
 
@@ -105,11 +106,24 @@ def load_model(cfg: DictConfig, run_dir: Path) -> Any:
     return model.cpu().eval()
 
 
-def _cached(path: Path, compute) -> Any:
-    """The JSON at ``path``, computed and written first if missing (always read back: str keys)."""
-    if not path.is_file():
-        atomic_write_json(path, compute())
-    return json.loads(path.read_text())
+def _cached(path: Path, compute, settings: Mapping[str, Any] | None = None) -> Any:
+    """The JSON at ``path``, computed and written first if missing (always read back: str keys).
+
+    With ``settings`` the file also stores them, and is recomputed when they changed (e.g. an
+    MPC result of another protocol or budget is not reused).
+    """
+    if settings is None:
+        if not path.is_file():
+            atomic_write_json(path, compute())
+        return json.loads(path.read_text())
+    settings = json.loads(json.dumps(settings))  # the form it is read back in
+    stored = json.loads(path.read_text()) if path.is_file() else {}
+    if stored.get("settings") != settings:
+        if stored:
+            logger.info("Recomputing %s: its evaluation settings changed", path)
+        stored = {"settings": settings, "value": compute()}
+        atomic_write_json(path, stored)
+    return json.loads(json.dumps(stored["value"]))
 
 
 def to_dict(node: DictConfig) -> dict[str, Any]:
@@ -178,8 +192,9 @@ def run_row(
         method = kinet_method if isinstance(net, KINetWorldModel) else "model_mpc"
         generalization = model in tables.generalization_models
 
+        settings = rearrangement_settings(cfg, eval_overrides, [method])
+
         def mpc() -> dict[str, Any]:
-            settings = rearrangement_settings(cfg, eval_overrides, [method])
             start = time.monotonic()
             summary = evaluate_rearrangement(
                 net, settings, run_dir / "tables_mpc", generalization, progress=True
@@ -187,7 +202,9 @@ def run_row(
             logger.info("MPC evaluation of %s took %.0f s", cfg.exp_name, time.monotonic() - start)
             return {cond: by_method[method] for cond, by_method in summary.items()}
 
-        row["mpc"] = _cached(run_dir / "tables_mpc.json", mpc)
+        row["mpc"] = _cached(run_dir / "tables_mpc.json", mpc, {
+            "rearrangement": settings.as_dict(), "generalization": generalization
+        })
     return row
 
 
@@ -201,7 +218,7 @@ def references(tables: DictConfig, out_dir: Path) -> tuple[dict[str, Any], Rearr
         summary = evaluate_rearrangement(None, settings, out_dir / "references", progress=True)
         return summary["summary"]["comparison"]
 
-    return _cached(out_dir / "references.json", compute), settings
+    return _cached(out_dir / "references.json", compute, settings.as_dict()), settings
 
 
 def build_tables(tables: DictConfig, out_dir: Path) -> Path:
@@ -236,8 +253,8 @@ def build_tables(tables: DictConfig, out_dir: Path) -> Path:
             f"Command: `python -m kinet_rl.tables tables={tables.scale}`; row configs: "
             "`+exp=blocks_<camera>view<suffix>` with the overrides of "
             f"`conf/tables/{tables.scale}.yaml`; training seeds {seeds}, test sequences seed 0, "
-            "rearrangement episodes seed 10000 + i (the same episodes for every row; MPC with the "
-            f"models of seed {seeds[0]}).",
+            f"rearrangement: {settings.split} episodes, seeds {settings.first_seed} + i (the same "
+            f"episodes for every row; MPC with the models of seed {seeds[0]}).",
             "",
             "## Table I: single-step forward error (BlockObjs, 3 objects)",
             "",
@@ -270,8 +287,9 @@ def build_tables(tables: DictConfig, out_dir: Path) -> Path:
             ],
             f"## MPC: distance to goal after T pushes ({tables.mpc_camera} camera)",
             "",
-            "Ground-truth mean object distance to its goal position, mm, mean ± standard error over "
-            "episodes; success: every object within the success threshold at T.",
+            "Ground-truth mean object distance to its goal position, mm, mean ± 95% interval over "
+            "episodes (Student's t); success: every object within the success threshold at T "
+            f"(95% Wilson interval). Every row plans with {budget_text(settings.planner)}.",
             "",
             mpc_table(
                 mpc,
@@ -282,7 +300,7 @@ def build_tables(tables: DictConfig, out_dir: Path) -> Path:
             "",
             f"![distance to goal]({plot.name})",
             "",
-            "## Table II: generalization (MPC final distance, mm, mean ± s.e.)",
+            "## Table II: generalization (MPC final distance, mm, mean ± 95% interval)",
             "",
             table_ii(
                 cells,

@@ -90,7 +90,7 @@ def test_evaluate_rearrangement_writes_plot_markdown_json_and_video(
         json.loads((tmp_path / "rearrangement.json").read_text())["summary"].keys()
         == summary.keys()
     )
-    video = iio.imread(tmp_path / f"rearrangement_seed{settings.seed}.gif")
+    video = iio.imread(tmp_path / f"rearrangement_seed{settings.first_seed}.gif")
     assert 1 <= video.shape[0] <= 4  # T + 1 frames (the GIF writer merges identical ones)
     assert video.shape[2] > 2 * video.shape[1] * 0.9
 

@@ -71,7 +71,6 @@ def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, con
             "workers": 1,
             "videos": 0,
             "planner": tiny_planner,
-            "oracle_planner": tiny_planner,
         }
         tables.overrides = smoke_overrides(tmp_path)
         tables.model_overrides = {

@@ -14,7 +14,7 @@ def test_jobs_share_seeds_across_methods_and_record_videos() -> None:
     seeds = {m: [j.seed for j in jobs if j.method == m] for m in settings.methods}
     assert all(s == seeds["random"] for s in seeds.values())
     assert [(j.method, j.seed) for j in jobs if j.record] == [
-        (settings.kinet_method, settings.seed)
+        (settings.kinet_method, settings.first_seed)
     ]
     cells = [
         j for j in make_jobs(settings, settings.conditions()) if j.condition.role != "comparison"

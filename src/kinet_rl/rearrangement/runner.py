@@ -2,7 +2,7 @@
 
 Every episode is a job ``(condition, method, seed)``; jobs run in a ``spawn`` process pool
 (each worker rebuilds the model from its weights once and uses one torch thread) or inline with
-``workers <= 1``. Episode ``i`` of a condition uses seed ``seed + i`` for its scene and goal,
+``workers <= 1``. Episode ``i`` of a condition uses seed ``first_seed + i`` (by split) for its scene and goal,
 the same for every method, so methods are compared on identical episodes. Writing reports is the
 caller's (:mod:`kinet_rl.rearrangement.report`).
 """
@@ -95,7 +95,7 @@ def make_jobs(settings: RearrangementSettings, conditions: Iterable[Condition]) 
                     and method == settings.kinet_method
                     and i < settings.videos
                 )
-                jobs.append(Job(condition, method, settings.seed + i, record))
+                jobs.append(Job(condition, method, settings.first_seed + i, record))
     return jobs
 
 

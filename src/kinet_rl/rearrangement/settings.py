@@ -12,9 +12,24 @@ from typing import Any, Literal
 from kinet_rl.envs.settings import SceneSettings
 
 #: The comparison's methods by default (names of :data:`kinet_rl.rearrangement.methods.METHODS`).
-DEFAULT_METHODS = ("kinet_graph", "kinet_graph_distance", "kinet_keypoints", "random", "oracle")
+DEFAULT_METHODS = (
+    "kinet_graph",
+    "kinet_graph_dot",
+    "kinet_graph_distance",
+    "kinet_keypoints",
+    "kinet_keypoints_l2",
+    "random",
+    "oracle",
+)
 
 Role = Literal["comparison", "generalization", "background"]
+Split = Literal["validation", "test"]
+
+#: Seed of the first episode of each split: episode ``i`` uses ``SPLIT_SEEDS[split] + i``. Costs,
+#: planner settings and defaults are chosen on validation episodes and reported on test episodes,
+#: which are never looked at while choosing (up to 40,000 validation episodes stay disjoint).
+#: Training data never uses these seeds: collection seeds episodes by a hash of (run seed, index).
+SPLIT_SEEDS: dict[str, int] = {"validation": 10_000, "test": 50_000}
 
 
 @dataclass(frozen=True)
@@ -79,15 +94,16 @@ class RearrangementSettings:
         task: Task and metric settings.
         episodes: Episodes per method in the comparison.
         methods: Methods of the comparison (names in ``kinet_rl.rearrangement.METHODS``).
-        planner: :class:`GraphMPCPlanner` settings of the learned-model controllers.
-        oracle_planner: Planner settings of the oracle (its model is cheap).
+        planner: :class:`GraphMPCPlanner` settings (the budget) of every planning method: the
+            learned-model controllers and the oracle plan with the same budget.
         oracle_contact_radius: Object-plus-pusher radius of the oracle's push model, metres.
         num_objects: Object counts of the generalization table (empty: skipped).
         geometries: Geometries of the generalization table.
         backgrounds: Extra backgrounds to test (e.g. ``["random"]``; empty: skipped).
         generalization_episodes: Episodes per generalization cell.
         workers: Parallel worker processes (<= 1 runs inline).
-        seed: Seed of the first episode.
+        split: ``"validation"`` (choosing) or ``"test"`` (reporting) episodes, see
+            :data:`SPLIT_SEEDS`.
         videos: Episodes of ``kinet_method`` recorded as GIFs.
         kinet_method: The KINet planner of the generalization conditions and the videos.
     """
@@ -97,20 +113,26 @@ class RearrangementSettings:
     episodes: int = 4
     methods: tuple[str, ...] = DEFAULT_METHODS
     planner: Mapping[str, Any] = field(default_factory=lambda: planner_budget(3, 64, 8))
-    oracle_planner: Mapping[str, Any] = field(default_factory=lambda: planner_budget(5, 256, 16))
     oracle_contact_radius: float = 0.035
     num_objects: tuple[int, ...] = ()
     geometries: tuple[str, ...] = ("train", "gen")
     backgrounds: tuple[str, ...] = ()
     generalization_episodes: int = 2
     workers: int = 2
-    seed: int = 10_000
+    split: Split = "test"
     videos: int = 1
     kinet_method: str = "kinet_graph_distance"
 
     def __post_init__(self) -> None:
         if self.episodes < 1 or self.task.num_steps < 1:
             raise ValueError("episodes and task.num_steps must be at least 1.")
+        if self.split not in SPLIT_SEEDS:
+            raise ValueError(f"eval.split={self.split!r}; choose one of {list(SPLIT_SEEDS)}.")
+
+    @property
+    def first_seed(self) -> int:
+        """Seed of the split's first episode (episode ``i`` uses ``first_seed + i``)."""
+        return SPLIT_SEEDS[self.split]
 
     @classmethod
     def from_dicts(
@@ -129,16 +151,14 @@ class RearrangementSettings:
         for key in ("methods", "num_objects", "geometries", "backgrounds"):
             if key in kwargs:
                 kwargs[key] = tuple(kwargs[key] or ())
-        for key in ("planner", "oracle_planner"):
-            if key in kwargs:
-                kwargs[key] = dict(kwargs[key])
+        if "planner" in kwargs:
+            kwargs["planner"] = dict(kwargs["planner"])
         return cls(scene=SceneSettings.from_mapping(env_cfg), task=task, **kwargs)
 
     def as_dict(self) -> dict[str, Any]:
         """Plain-container form (for JSON)."""
         out = asdict(self)
         out["planner"] = dict(self.planner)
-        out["oracle_planner"] = dict(self.oracle_planner)
         return out
 
     def conditions(self, generalization: bool = True) -> list[Condition]:
