@@ -7,14 +7,16 @@ overrides (``conf/tables/<scale>.yaml``); the row is trained with
 as every other row:
 
 * Table I: single-step forward error on held-out test sequences (same sequences per camera).
-* MPC table (``mpc_camera`` only): :func:`~kinet_rl.pipeline.evaluate_rearrangement`
-  with ``kinet_graph`` (KINet variants) or ``model_mpc`` (baselines), on the same episodes, plus
-  random pushes and the oracle.
-* Table II: the generalization cells (1-5 objects x train/gen geometry) of ``generalization_models``.
+* MPC tables (``mpc_camera`` only), one per planner budget of ``mpc_budgets`` (every row of a
+  table plans with the same budget): :func:`~kinet_rl.pipeline.evaluate_rearrangement` with the
+  eval group's ``kinet_method`` (KINet variants) or ``model_mpc`` (baselines), on the same
+  episodes, plus random pushes and the oracle.
+* Table II: the generalization cells (1-5 objects x train/gen geometry) of
+  ``generalization_models``, at the first budget.
 
 Every stage writes its JSON next to the row's run; re-running skips finished stages (a row's
-training is finished when its ``results.json`` exists). Writes ``<out>/tables.md`` and
-``<out>/mpc_curves.png``.
+training is finished when its ``results.json`` exists; an MPC result is redone when its
+evaluation settings changed). Writes ``<out>/tables.md`` and ``<out>/mpc_curves_<budget>.png``.
 """
 
 from __future__ import annotations
@@ -132,13 +134,20 @@ def to_dict(node: DictConfig) -> dict[str, Any]:
 
 
 def rearrangement_settings(
-    cfg: DictConfig, eval_overrides: Mapping[str, Any], methods: list[str] | None = None
+    cfg: DictConfig,
+    eval_overrides: Mapping[str, Any],
+    methods: list[str] | None = None,
+    budget: str | None = None,
+    tables: DictConfig | None = None,
 ) -> RearrangementSettings:
-    """The row's eval group with the table scale's overrides and, if given, these methods."""
+    """The row's eval group with the table scale's overrides, and if given these methods and the
+    planner budget ``tables.mpc_budgets[budget]`` (merged onto the eval group's planner)."""
     container = to_dict(cfg)
     eval_cfg = {**container["eval"], **eval_overrides}
     if methods is not None:
         eval_cfg["methods"] = methods
+    if budget is not None and tables is not None:
+        eval_cfg["planner"] = {**eval_cfg["planner"], **to_dict(tables.mpc_budgets[budget])}
     return RearrangementSettings.from_dicts(eval_cfg, container["env"])
 
 
@@ -186,46 +195,53 @@ def run_row(
             floor=floor,
         )
 
-    row: dict[str, Any] = {"forward": _cached(run_dir / "tables_forward.json", forward)}
+    row: dict[str, Any] = {"forward": _cached(run_dir / "tables_forward.json", forward), "mpc": {}}
     if camera == tables.mpc_camera and seed == tables.seeds[0]:
         kinet_method = rearrangement_settings(cfg, eval_overrides).kinet_method
         method = kinet_method if isinstance(net, KINetWorldModel) else "model_mpc"
-        generalization = model in tables.generalization_models
+        for i, budget in enumerate(tables.mpc_budgets):
+            # Table II and the backgrounds run at the first budget only.
+            generalization = i == 0 and model in tables.generalization_models
+            settings = rearrangement_settings(cfg, eval_overrides, [method], budget, tables)
 
-        settings = rearrangement_settings(cfg, eval_overrides, [method])
+            def mpc(settings=settings, generalization=generalization) -> dict[str, Any]:
+                start = time.monotonic()
+                summary = evaluate_rearrangement(
+                    net, settings, run_dir / f"tables_mpc_{budget}", generalization, progress=True
+                )["summary"]
+                logger.info("MPC of %s at %s took %.0f s", cfg.exp_name, budget, time.monotonic() - start)
+                return {cond: by_method[method] for cond, by_method in summary.items()}
 
-        def mpc() -> dict[str, Any]:
-            start = time.monotonic()
-            summary = evaluate_rearrangement(
-                net, settings, run_dir / "tables_mpc", generalization, progress=True
-            )["summary"]
-            logger.info("MPC evaluation of %s took %.0f s", cfg.exp_name, time.monotonic() - start)
-            return {cond: by_method[method] for cond, by_method in summary.items()}
-
-        row["mpc"] = _cached(run_dir / "tables_mpc.json", mpc, {
-            "rearrangement": settings.as_dict(), "generalization": generalization
-        })
+            key = {"rearrangement": settings.as_dict(), "generalization": generalization}
+            row["mpc"][budget] = _cached(run_dir / f"tables_mpc_{budget}.json", mpc, key)
     return row
 
 
-def references(tables: DictConfig, out_dir: Path) -> tuple[dict[str, Any], RearrangementSettings]:
-    """Random pushes and the oracle on the MPC table's episodes (no model), and the settings."""
+def references(
+    tables: DictConfig, out_dir: Path, budget: str
+) -> tuple[dict[str, Any], RearrangementSettings]:
+    """Random pushes and the oracle on the MPC table's episodes at ``budget``, and the settings."""
     cfg = row_config(tables, tables.models[0], tables.mpc_camera)
     eval_overrides = to_dict(tables.eval)
-    settings = rearrangement_settings(cfg, eval_overrides, ["random", "oracle"])
+    settings = rearrangement_settings(cfg, eval_overrides, ["random", "oracle"], budget, tables)
 
     def compute() -> dict[str, Any]:
-        summary = evaluate_rearrangement(None, settings, out_dir / "references", progress=True)
+        summary = evaluate_rearrangement(
+            None, settings, out_dir / f"references_{budget}", progress=True
+        )
         return summary["summary"]["comparison"]
 
-    return _cached(out_dir / "references.json", compute, settings.as_dict()), settings
+    stats = _cached(out_dir / f"references_{budget}.json", compute, settings.as_dict())
+    return stats, settings
 
 
 def build_tables(tables: DictConfig, out_dir: Path) -> Path:
-    """Runs every row (resuming), then writes ``tables.md`` and ``mpc_curves.png``; returns the markdown path."""
+    """Runs every row (resuming), then writes ``tables.md`` and one ``mpc_curves_<budget>.png``
+    per planner budget; returns the markdown path."""
     forward: dict[str, dict[str, list[Any]]] = {}
     run_dirs: dict[str, dict[str, list[Path]]] = {}
-    mpc: dict[str, Any] = {}
+    budgets = list(tables.mpc_budgets)
+    mpc: dict[str, dict[str, Any]] = {budget: {} for budget in budgets}
     cells: dict[str, dict[str, Any]] = {}
     seeds = list(tables.seeds)
     rows = [(m, c, s) for s in seeds for c in tables.cameras for m in tables.models]
@@ -236,12 +252,34 @@ def build_tables(tables: DictConfig, out_dir: Path) -> Path:
         run_dirs.setdefault(camera, {}).setdefault(LABELS.get(model, model), []).append(
             run_dir_of(out_dir, experiment_name(model, camera), seed)
         )
-        if "mpc" in row:
-            mpc[model] = row["mpc"]["comparison"]
-            cells[model] = {k: v for k, v in row["mpc"].items() if k != "comparison"}
-    reference_stats, settings = references(tables, out_dir)
-    mpc.update(reference_stats)
-    plot = plot_mpc_curves(mpc, out_dir / "mpc_curves.png")
+        for budget, by_condition in row["mpc"].items():
+            mpc[budget][model] = by_condition["comparison"]
+            if budget == budgets[0]:
+                cells[model] = {k: v for k, v in by_condition.items() if k != "comparison"}
+    mpc_sections, settings_of = [], {}
+    for budget in budgets:
+        reference_stats, settings = settings_of[budget] = references(tables, out_dir, budget)
+        mpc[budget].update(reference_stats)
+        plot = plot_mpc_curves(mpc[budget], out_dir / f"mpc_curves_{budget}.png")
+        mpc_sections += [
+            f"## MPC at the {budget} budget: distance to goal after T pushes "
+            f"({tables.mpc_camera} camera)",
+            "",
+            "Ground-truth mean object distance to its goal position, mm, mean ± 95% interval over "
+            "episodes (Student's t); success: every object within the success threshold at T "
+            f"(95% Wilson interval). Every row plans with {budget_text(settings.planner)}.",
+            "",
+            mpc_table(
+                mpc[budget],
+                [*tables.models, "random", "oracle"],
+                settings.task.num_steps,
+                settings.kinet_method,
+            ),
+            "",
+            f"![distance to goal]({plot.name})",
+            "",
+        ]
+    settings = settings_of[budgets[0]][1]
     curves = [
         plot_learning_curves(runs, out_dir / f"learning_curves_{camera}.png", f"{camera} camera")
         for camera, runs in run_dirs.items()
@@ -285,22 +323,9 @@ def build_tables(tables: DictConfig, out_dir: Path) -> Path:
                     "",
                 )
             ],
-            f"## MPC: distance to goal after T pushes ({tables.mpc_camera} camera)",
-            "",
-            "Ground-truth mean object distance to its goal position, mm, mean ± 95% interval over "
-            "episodes (Student's t); success: every object within the success threshold at T "
-            f"(95% Wilson interval). Every row plans with {budget_text(settings.planner)}.",
-            "",
-            mpc_table(
-                mpc,
-                [*tables.models, "random", "oracle"],
-                settings.task.num_steps,
-                settings.kinet_method,
-            ),
-            "",
-            f"![distance to goal]({plot.name})",
-            "",
-            "## Table II: generalization (MPC final distance, mm, mean ± 95% interval)",
+            *mpc_sections,
+            f"## Table II: generalization (MPC final distance at the {budgets[0]} budget, mm, mean "
+            "± 95% interval)",
             "",
             table_ii(
                 cells,
