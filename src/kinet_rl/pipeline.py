@@ -16,6 +16,7 @@ from typing import Any
 
 import torch
 from torch import nn
+from torchrl.record.loggers import Logger
 
 from kinet_rl.atomic import atomic_write_json
 from kinet_rl.data import collect_dataset, load_dataset
@@ -32,7 +33,7 @@ from kinet_rl.rearrangement.runner import run_rearrangement
 from kinet_rl.rearrangement.settings import RearrangementSettings
 from kinet_rl.training.checkpoint import TrainingCheckpoint
 from kinet_rl.training.distributed import init_distributed
-from kinet_rl.training.loggers import make_logger
+from kinet_rl.training.loggers import MEDIA_SUFFIXES, log_media, make_logger
 from kinet_rl.training.loop import Trainer, TrainerSettings
 
 log = logging.getLogger(__name__)
@@ -171,8 +172,13 @@ def evaluate_rearrangement(
     out_dir: str | Path,
     generalization: bool = False,
     progress: bool = False,
+    logger: Logger | None = None,
+    step: int = 0,
 ) -> dict[str, Any]:
     """Runs the rearrangement evaluation and writes its report (plot, markdown, JSON, GIFs).
+
+    With a ``logger``, the plots and GIFs also go to it, as ``rearrangement/<file stem>`` at
+    ``step``.
 
     Returns:
         ``{"summary": {condition: {method: stats}}, "settings": ..., "files": [...]}``; the
@@ -180,6 +186,10 @@ def evaluate_rearrangement(
     """
     results = run_rearrangement(model, settings, generalization, progress)
     files = write_report(Path(out_dir), results)
+    if logger is not None:
+        for path in files:
+            if path.suffix in MEDIA_SUFFIXES:
+                log_media(logger, f"rearrangement/{path.stem}", path, step)
     log.info("Rearrangement evaluation written to %s", out_dir)
     return {
         "summary": results.summary(),
@@ -227,6 +237,7 @@ def run_experiment(
     loss = build_loss(model)
     scene = settings.scene
     geometry = SceneGeometry.of_scene(scene.task, scene.camera, scene.image_size)
+    logger = make_logger(settings.logger, run_dir, settings.name, None, settings.wandb_kwargs)
     report = TrainingReport(
         run_dir,
         settings.name,
@@ -236,6 +247,7 @@ def run_experiment(
         geometry,
         settings.report.horizons,
         settings.report.num_sequences,
+        logger,
     )
     trainer = Trainer(
         loss,
@@ -243,7 +255,7 @@ def run_experiment(
         data["val"],
         settings.trainer,
         TrainingCheckpoint(run_dir, settings.identity()),
-        make_logger(settings.logger, run_dir, settings.name, None, settings.wandb_kwargs),
+        logger,
         ctx,
         on_validate=report.on_validate,
     )
@@ -251,18 +263,22 @@ def run_experiment(
         log.info("Resumed %s at step %d", run_dir, trainer.step)
     trainer.fit()
     if not ctx.is_main:
+        logger.close()
         return {}
     model.save_checkpoint(run_dir / model_file(model), scene=scene)
     results = {**report.final(trainer.step), "world_size": ctx.world_size}
     episodes = settings.report.rearrangement_episodes
     if isinstance(model, KINetWorldModel) and episodes > 0:
         rearrangement = replace(settings.rearrangement, episodes=episodes)
-        summary = evaluate_rearrangement(model.cpu(), rearrangement, run_dir / "rearrangement")
+        summary = evaluate_rearrangement(
+            model.cpu(), rearrangement, run_dir / "rearrangement", logger=logger, step=trainer.step
+        )
         results["rearrangement"] = {
             condition: {method: stats["final_distance"] for method, stats in by_method.items()}
             for condition, by_method in summary["summary"].items()
         }
     atomic_write_json(run_dir / "results.json", results)
+    logger.close()  # flushes the last scalars and images
     return results
 
 
