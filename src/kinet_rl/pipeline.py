@@ -10,6 +10,7 @@ from __future__ import annotations
 import functools
 import logging
 from collections.abc import Callable, Mapping
+from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -17,7 +18,7 @@ from typing import Any
 import torch
 from torch import nn
 
-from kinet_rl.atomic import atomic_write_json
+from kinet_rl.atomic import atomic_write_json, directory_lock
 from kinet_rl.data import collect_dataset, load_dataset
 from kinet_rl.envs import make_env
 from kinet_rl.envs.geometry import SceneGeometry
@@ -29,7 +30,7 @@ from kinet_rl.rearrangement.report import write_report
 from kinet_rl.rearrangement.runner import run_rearrangement
 from kinet_rl.rearrangement.settings import RearrangementSettings
 from kinet_rl.training.checkpoint import TrainingCheckpoint
-from kinet_rl.training.distributed import init_distributed
+from kinet_rl.training.distributed import DistContext, init_distributed
 from kinet_rl.training.loggers import make_logger
 from kinet_rl.training.loop import Trainer, TrainerSettings
 
@@ -39,6 +40,8 @@ log = logging.getLogger(__name__)
 DATASET_ENV_KEYS = ("task", "camera", "image_size", "num_objects")
 #: File name of a trained model in its run directory.
 KINET_FILE, BASELINE_FILE = "kinet.pt", "model.pt"
+#: Folder of an evaluation's finished episodes (an interrupted evaluation resumes from them).
+EPISODES_DIR = "episodes"
 
 
 @dataclass(frozen=True)
@@ -172,12 +175,19 @@ def evaluate_rearrangement(
 ) -> dict[str, Any]:
     """Runs the rearrangement evaluation and writes its report (plot, markdown, JSON, GIFs).
 
+    ``out_dir`` is locked meanwhile; finished episodes are kept in ``<out_dir>/episodes``, so
+    that rerunning an interrupted evaluation runs only the missing ones.
+
     Returns:
         ``{"summary": {condition: {method: stats}}, "settings": ..., "files": [...]}``; the
         comparison's stats include ``final_distance`` (metres) and ``success_rate``.
     """
-    results = run_rearrangement(model, settings, generalization, progress)
-    files = write_report(Path(out_dir), results)
+    out_dir = Path(out_dir)
+    with directory_lock(out_dir, "writing a rearrangement evaluation"):
+        results = run_rearrangement(
+            model, settings, generalization, progress, store_dir=out_dir / EPISODES_DIR
+        )
+        files = write_report(out_dir, results)
     log.info("Rearrangement evaluation written to %s", out_dir)
     return {
         "summary": results.summary(),
@@ -207,10 +217,25 @@ def run_experiment(
 
     Returns:
         The numbers of ``results.json`` (empty on non-main processes).
+
+    Raises:
+        DirectoryInUseError: Another process is training in ``run_dir``.
     """
     run_dir = Path(run_dir)
     check_methods(settings.rearrangement)
     ctx = init_distributed(settings.device)
+    with directory_lock(run_dir, "training") if ctx.is_main else nullcontext():
+        return _train_and_evaluate(settings, build_model, build_loss, run_dir, ctx)
+
+
+def _train_and_evaluate(
+    settings: ExperimentSettings,
+    build_model: Callable[[], nn.Module],
+    build_loss: Callable[[nn.Module], nn.Module],
+    run_dir: Path,
+    ctx: DistContext,
+) -> dict[str, Any]:
+    """:func:`run_experiment` in its locked run directory."""
     torch.manual_seed(settings.seed + ctx.rank)
     if ctx.is_main:
         collect_datasets(settings.env, settings.data)
