@@ -25,6 +25,7 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
 from kinet_rl.configs import config_dir
+from kinet_rl.interrupts import exit_on_interrupt
 from kinet_rl.models import KINetWorldModel
 from kinet_rl.models.pretrained import resolve_checkpoint
 from kinet_rl.pipeline import KINET_FILE, evaluate_rearrangement
@@ -74,6 +75,7 @@ def evaluate(cfg: DictConfig, run_dir: Path) -> dict[str, Any]:
         run_logger.close()
 
 
+@exit_on_interrupt("kinet_rl.evaluate")
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
 def main(cfg: DictConfig) -> None:
     """Entry point."""

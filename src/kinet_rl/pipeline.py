@@ -10,6 +10,7 @@ from __future__ import annotations
 import functools
 import logging
 from collections.abc import Callable, Mapping
+from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -18,7 +19,7 @@ import torch
 from torch import nn
 from torchrl.record.loggers import Logger
 
-from kinet_rl.atomic import atomic_write_json
+from kinet_rl.atomic import atomic_write_json, directory_lock
 from kinet_rl.data import collect_dataset, load_dataset
 from kinet_rl.envs import make_env
 from kinet_rl.envs.geometry import SceneGeometry
@@ -27,12 +28,12 @@ from kinet_rl.evaluation.forward import keypoint_accuracy
 from kinet_rl.evaluation.report import ReportSettings, TrainingReport, hit_radius
 from kinet_rl.models.pretrained import model_card
 from kinet_rl.models.world_model import KINetWorldModel
-from kinet_rl.rearrangement.methods import check_methods
+from kinet_rl.rearrangement.methods import check_methods, check_model
 from kinet_rl.rearrangement.report import write_report
 from kinet_rl.rearrangement.runner import run_rearrangement
 from kinet_rl.rearrangement.settings import RearrangementSettings
 from kinet_rl.training.checkpoint import TrainingCheckpoint
-from kinet_rl.training.distributed import init_distributed
+from kinet_rl.training.distributed import DistContext, init_distributed
 from kinet_rl.training.loggers import MEDIA_SUFFIXES, log_media, make_logger
 from kinet_rl.training.loop import Trainer, TrainerSettings
 
@@ -42,6 +43,8 @@ log = logging.getLogger(__name__)
 DATASET_ENV_KEYS = ("task", "camera", "image_size", "num_objects")
 #: File name of a trained model in its run directory.
 KINET_FILE, BASELINE_FILE = "kinet.pt", "model.pt"
+#: Folder of an evaluation's finished episodes (an interrupted evaluation resumes from them).
+EPISODES_DIR = "episodes"
 
 
 @dataclass(frozen=True)
@@ -178,14 +181,21 @@ def evaluate_rearrangement(
     """Runs the rearrangement evaluation and writes its report (plot, markdown, JSON, GIFs).
 
     With a ``logger``, the plots and GIFs also go to it, as ``rearrangement/<file stem>`` at
-    ``step``.
+    ``step``. ``out_dir`` is locked meanwhile; finished episodes are kept in
+    ``<out_dir>/episodes``, so that rerunning an interrupted evaluation runs only the missing ones.
 
     Returns:
         ``{"summary": {condition: {method: stats}}, "settings": ..., "files": [...]}``; the
         comparison's stats include ``final_distance`` (metres) and ``success_rate``.
     """
-    results = run_rearrangement(model, settings, generalization, progress)
-    files = write_report(Path(out_dir), results)
+    check_methods(settings)  # bad input fails before anything is written
+    check_model(settings.conditions(generalization), model)
+    out_dir = Path(out_dir)
+    with directory_lock(out_dir, "writing a rearrangement evaluation"):
+        results = run_rearrangement(
+            model, settings, generalization, progress, store_dir=out_dir / EPISODES_DIR
+        )
+        files = write_report(out_dir, results)
     if logger is not None:
         for path in files:
             if path.suffix in MEDIA_SUFFIXES:
@@ -219,10 +229,25 @@ def run_experiment(
 
     Returns:
         The numbers of ``results.json`` (empty on non-main processes).
+
+    Raises:
+        DirectoryInUseError: Another process is training in ``run_dir``.
     """
     run_dir = Path(run_dir)
     check_methods(settings.rearrangement)
     ctx = init_distributed(settings.device)
+    with directory_lock(run_dir, "training") if ctx.is_main else nullcontext():
+        return _train_and_evaluate(settings, build_model, build_loss, run_dir, ctx)
+
+
+def _train_and_evaluate(
+    settings: ExperimentSettings,
+    build_model: Callable[[], nn.Module],
+    build_loss: Callable[[nn.Module], nn.Module],
+    run_dir: Path,
+    ctx: DistContext,
+) -> dict[str, Any]:
+    """:func:`run_experiment` in its locked run directory."""
     torch.manual_seed(settings.seed + ctx.rank)
     if ctx.is_main:
         collect_datasets(settings.env, settings.data)

@@ -34,7 +34,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import get_class, instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from kinet_rl.atomic import atomic_write_json, atomic_write_text
+from kinet_rl.atomic import atomic_write_json, atomic_write_text, directory_lock
 from kinet_rl.comparison import (
     LABELS,
     horizon_table,
@@ -48,6 +48,7 @@ from kinet_rl.configs import config_dir
 from kinet_rl.data import load_dataset
 from kinet_rl.envs.geometry import SceneGeometry
 from kinet_rl.evaluation.forward import forward_errors
+from kinet_rl.interrupts import exit_on_interrupt
 from kinet_rl.models import KINetWorldModel
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.pipeline import (
@@ -342,11 +343,13 @@ def build_tables(tables: DictConfig, out_dir: Path) -> Path:
     return path
 
 
+@exit_on_interrupt("kinet_rl.tables")
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="tables")
 def main(cfg: DictConfig) -> None:
     """Entry point."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
-    path = build_tables(cfg.tables, out_dir)
+    with directory_lock(out_dir, "building the comparison tables"):
+        path = build_tables(cfg.tables, out_dir)
     print(path.read_text())
 
 
