@@ -23,6 +23,7 @@ import json
 import logging
 import time
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, cast
 
@@ -42,6 +43,7 @@ from kinet_rl.comparison import (
     table_i,
     table_ii,
 )
+from kinet_rl.config_schema import ConfigError, check_keys, config_group, require, settings_from
 from kinet_rl.configs import config_dir
 from kinet_rl.data import load_dataset
 from kinet_rl.envs.geometry import SceneGeometry
@@ -53,6 +55,7 @@ from kinet_rl.pipeline import (
     DATASET_ENV_KEYS,
     KINET_FILE,
     ExperimentSettings,
+    check_config,
     evaluate_rearrangement,
     run_experiment,
 )
@@ -73,6 +76,62 @@ EXPERIMENT_SUFFIX = {
 CAMERAS = ("top", "side")
 
 
+@dataclass(frozen=True)
+class TablesSettings:
+    """The ``tables`` config group (``conf/tables/<scale>.yaml``; each file documents its keys).
+
+    Raises:
+        ConfigError: A model, camera or seed that no row can have, named.
+    """
+
+    scale: str
+    models: tuple[str, ...]
+    cameras: tuple[str, ...]
+    mpc_camera: str
+    generalization_models: tuple[str, ...]
+    seeds: tuple[int, ...]
+    forward_horizons: tuple[int, ...]
+    forward_sequences: int
+    overrides: tuple[str, ...] = ()
+    model_overrides: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    eval: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name, choices, least in (
+            ("models", tuple(EXPERIMENT_SUFFIX), 1),
+            ("cameras", CAMERAS, 1),
+            ("generalization_models", self.models, 0),
+            ("model_overrides", tuple(EXPERIMENT_SUFFIX), 0),
+        ):
+            values = list(getattr(self, name))
+            require(
+                len(values) >= least and set(values) <= set(choices),
+                name,
+                values,
+                f"{'a non-empty list' if least else 'a list'} of names from {list(choices)}",
+            )
+        require(self.mpc_camera in self.cameras, "mpc_camera", self.mpc_camera, "one of cameras")
+        for name, low in (("seeds", 0), ("forward_horizons", 1)):
+            values = list(getattr(self, name))
+            require(
+                bool(values) and min(values) >= low,
+                name,
+                values,
+                f"a non-empty list of integers of at least {low}",
+            )
+        require(
+            self.forward_sequences >= 1,
+            "forward_sequences",
+            self.forward_sequences,
+            "an integer of at least 1",
+        )
+
+    @classmethod
+    def from_container(cls, values: Mapping[str, Any]) -> TablesSettings:
+        """Settings from the resolved ``tables`` group."""
+        return settings_from(cls, values, "tables")
+
+
 def experiment_name(model: str, camera: str) -> str:
     """The experiment of a table row, e.g. ``blocks_topview_determ``."""
     if model not in EXPERIMENT_SUFFIX or camera not in CAMERAS:
@@ -83,7 +142,7 @@ def experiment_name(model: str, camera: str) -> str:
     return f"blocks_{camera}view{EXPERIMENT_SUFFIX[model]}"
 
 
-def row_config(tables: DictConfig, model: str, camera: str, seed: int = 0) -> DictConfig:
+def row_config(tables: TablesSettings, model: str, camera: str, seed: int = 0) -> DictConfig:
     """The composed training config of a row and training seed (needs an initialised Hydra)."""
     exp = experiment_name(model, camera)
     extra = [o.replace("{camera}", camera) for o in tables.overrides]
@@ -95,6 +154,28 @@ def row_config(tables: DictConfig, model: str, camera: str, seed: int = 0) -> Di
             f"Experiment {exp} sets exp_name={cfg.exp_name}; the tables need them equal."
         )
     return cfg
+
+
+def check_rows(tables: TablesSettings) -> None:
+    """Composes and checks the config of every row (:func:`~kinet_rl.pipeline.check_config`,
+    and its evaluation with the scale's ``eval`` overrides) before any row trains.
+
+    Raises:
+        ConfigError: The first invalid entry, naming the row it was found in.
+    """
+    for model in tables.models:
+        for camera in tables.cameras:
+            cfg = row_config(tables, model, camera, tables.seeds[0])
+            try:
+                check_config(to_dict(cfg))
+                with config_group("tables.eval"):  # the row's eval group, with these overrides
+                    rearrangement_settings(cfg, tables.eval)
+            except ConfigError as err:
+                raise ConfigError(
+                    err.key,
+                    f"{err.problem} (in row {cfg.exp_name}: +exp={cfg.exp_name} with the "
+                    f"overrides and eval entries of conf/tables/{tables.scale}.yaml)",
+                ) from None
 
 
 def load_model(cfg: DictConfig, run_dir: Path) -> Any:
@@ -134,7 +215,7 @@ def run_dir_of(out_dir: Path, exp_name: str, seed: int) -> Path:
 
 
 def run_row(
-    tables: DictConfig, model: str, camera: str, out_dir: Path, seed: int = 0
+    tables: TablesSettings, model: str, camera: str, out_dir: Path, seed: int = 0
 ) -> dict[str, Any]:
     """Trains (unless finished) and evaluates one row and seed; returns its table entries.
 
@@ -154,7 +235,7 @@ def run_row(
         )
         logger.info("Trained %s in %.0f s", cfg.exp_name, time.monotonic() - start)
     net = load_model(cfg, run_dir)
-    eval_overrides = to_dict(tables.eval)
+    eval_overrides = tables.eval
 
     def forward() -> dict[str, Any]:
         settings = ExperimentSettings.from_container(to_dict(cfg))
@@ -191,11 +272,12 @@ def run_row(
     return row
 
 
-def references(tables: DictConfig, out_dir: Path) -> tuple[dict[str, Any], RearrangementSettings]:
+def references(
+    tables: TablesSettings, out_dir: Path
+) -> tuple[dict[str, Any], RearrangementSettings]:
     """Random pushes and the oracle on the MPC table's episodes (no model), and the settings."""
     cfg = row_config(tables, tables.models[0], tables.mpc_camera)
-    eval_overrides = to_dict(tables.eval)
-    settings = rearrangement_settings(cfg, eval_overrides, ["random", "oracle"])
+    settings = rearrangement_settings(cfg, tables.eval, ["random", "oracle"])
 
     def compute() -> dict[str, Any]:
         summary = evaluate_rearrangement(None, settings, out_dir / "references", progress=True)
@@ -204,8 +286,10 @@ def references(tables: DictConfig, out_dir: Path) -> tuple[dict[str, Any], Rearr
     return _cached(out_dir / "references.json", compute), settings
 
 
-def build_tables(tables: DictConfig, out_dir: Path) -> Path:
-    """Runs every row (resuming), then writes ``tables.md`` and ``mpc_curves.png``; returns the markdown path."""
+def build_tables(tables: TablesSettings, out_dir: Path) -> Path:
+    """Checks every row's config, runs every row (resuming), then writes ``tables.md`` and
+    ``mpc_curves.png``; returns the markdown path (needs an initialised Hydra)."""
+    check_rows(tables)
     forward: dict[str, dict[str, list[Any]]] = {}
     run_dirs: dict[str, dict[str, list[Path]]] = {}
     mpc: dict[str, Any] = {}
@@ -303,7 +387,9 @@ def build_tables(tables: DictConfig, out_dir: Path) -> Path:
 def main(cfg: DictConfig) -> None:
     """Entry point."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
-    path = build_tables(cfg.tables, out_dir)
+    container = to_dict(cfg)
+    check_keys(container, ["tables"])
+    path = build_tables(TablesSettings.from_container(container["tables"]), out_dir)
     print(path.read_text())
 
 
