@@ -1,4 +1,4 @@
-"""Shared fixtures: tiny untrained models, random images and the Hydra config folder.
+"""Shared fixtures: tiny untrained models, random images, the Hydra config folder, a full disk.
 
 This file also puts ``tests/`` on ``sys.path`` (pytest's default ``prepend`` import mode inserts
 the folder of a rootdir-level ``conftest.py``), so the helper modules beside it
@@ -7,12 +7,16 @@ the folder of a rootdir-level ``conftest.py``), so the helper modules beside it
 
 from __future__ import annotations
 
+import errno
+import itertools
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 import torch
 
+import kinet_rl.atomic
 from kinet_rl.baselines import (
     ImageForwardInverseModel,
     ImageForwardModel,
@@ -86,3 +90,40 @@ def random_images() -> Callable[..., torch.Tensor]:
         return torch.randint(0, 256, (*batch, size, size, 3), generator=gen, dtype=torch.uint8)
 
     return make
+
+
+class HalfWrittenFile:
+    """A real file whose next ``write`` stores half its bytes and fails as on a full disk."""
+
+    def __init__(self, file: Any) -> None:
+        self.file = file
+
+    def write(self, data: Any) -> int:
+        self.file.write(data[: len(data) // 2])
+        self.file.flush()
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.file, name)
+
+    def __enter__(self) -> HalfWrittenFile:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.file.close()
+
+
+@pytest.fixture
+def full_disk(monkeypatch: pytest.MonkeyPatch) -> Callable[[int], None]:
+    """``full_disk(n)``: after ``n`` more files, every atomic write fails midway with ENOSPC."""
+
+    def fill_after(files_that_fit: int) -> None:
+        opened = itertools.count()
+
+        def open_on_full_disk(file: Any, mode: str = "r", *args: Any, **kwargs: Any) -> Any:
+            handle = open(file, mode, *args, **kwargs)  # noqa: SIM115 (the caller closes it)
+            return handle if next(opened) < files_that_fit else HalfWrittenFile(handle)
+
+        monkeypatch.setattr(kinet_rl.atomic, "open", open_on_full_disk, raising=False)
+
+    return fill_after

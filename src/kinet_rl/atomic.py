@@ -1,11 +1,14 @@
-"""Atomic file writes (temporary file, fsync, rename) and safe checkpoint loading.
+"""Atomic file writes (temporary file, fsync, rename), directory locks and safe checkpoint loading.
 
-Every file kinet_rl writes goes through :func:`atomic_write`, so an interrupted job never leaves a
-half-written checkpoint, dataset marker, image or report behind.
+Every file kinet_rl writes goes through :func:`atomic_write`, so an interrupted job or a full
+disk never leaves a half-written checkpoint, dataset marker, image or report behind; a job that
+writes into a directory holds its :func:`directory_lock`, so a second job cannot write there too.
 """
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import json
 import os
 import pickle
@@ -16,14 +19,42 @@ from typing import IO, Any
 
 import torch
 
+#: Name of the lock file that :func:`directory_lock` holds in a directory.
+LOCK_FILE = ".lock"
+#: ``errno`` values of a full disk or an exhausted quota.
+DISK_FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
+
 
 class CheckpointError(RuntimeError):
     """A checkpoint is missing, corrupt, truncated or does not match what the caller expects."""
 
 
+class DiskFullError(OSError):
+    """A write failed for lack of disk space (or quota); the previous version of the file is kept."""
+
+
+class DirectoryInUseError(RuntimeError):
+    """Another live process holds the directory's lock (it is collecting or training there)."""
+
+
+def disk_full(path: Path, err: OSError) -> DiskFullError:
+    """The :class:`DiskFullError` for a failed write of ``path``."""
+    return DiskFullError(
+        err.errno,
+        f"Cannot write {path}: no space left on the device (or the disk quota is exhausted). "
+        f"Nothing was half-written: {path.name} keeps its previous complete version, if it had "
+        f"one. Free disk space under {path.parent} (or write elsewhere), then run the same "
+        "command again to resume.",
+    )
+
+
 @contextmanager
 def atomic_write(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO[Any]]:
-    """Opens a temporary file beside ``path``; on success syncs it and renames it over ``path``."""
+    """Opens a temporary file beside ``path``; on success syncs it and renames it over ``path``.
+
+    Raises:
+        DiskFullError: The disk filled up; ``path`` is left as it was.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
@@ -33,6 +64,10 @@ def atomic_write(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO[Any]]
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
+    except OSError as err:
+        if err.errno in DISK_FULL_ERRNOS:
+            raise disk_full(path, err) from err
+        raise
     finally:
         tmp.unlink(missing_ok=True)
     dir_fd = os.open(path.parent, os.O_RDONLY)
@@ -40,6 +75,43 @@ def atomic_write(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO[Any]]
         os.fsync(dir_fd)
     finally:
         os.close(dir_fd)
+
+
+@contextmanager
+def directory_lock(path: str | os.PathLike, activity: str) -> Iterator[Path]:
+    """Holds an exclusive lock on ``<path>/.lock`` for the block; yields the directory.
+
+    The lock is an ``fcntl.flock`` that the kernel releases when the holder exits, even killed,
+    so a lock left by a dead process never blocks. The file names the holder's PID and activity,
+    for the error that a second process gets.
+
+    Args:
+        path: The directory (created if missing).
+        activity: What this process does there (e.g. ``"collecting a dataset"``).
+
+    Raises:
+        DirectoryInUseError: Another process holds the lock.
+    """
+    path = Path(path)
+    path.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 4096, 0).decode(errors="replace").split(maxsplit=1)
+            pid = holder[0] if holder else "unknown"
+            doing = holder[1].strip() if len(holder) > 1 else "writing"
+            raise DirectoryInUseError(
+                f"{path} is in use: another process (PID {pid}) is {doing} there, and a "
+                "second writer would corrupt its files. Wait for that process to finish (or "
+                f"stop it, e.g. kill {pid}), or use another directory."
+            ) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()} {activity}\n".encode(), 0)
+        yield path
+    finally:
+        os.close(fd)  # releases the lock
 
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:

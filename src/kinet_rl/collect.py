@@ -14,11 +14,13 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from kinet_rl.configs import config_dir
+from kinet_rl.interrupts import exit_on_interrupt
 from kinet_rl.pipeline import check_config, collect_datasets
 
 logger = logging.getLogger(__name__)
 
 
+@exit_on_interrupt("kinet_rl.collect")
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
 def main(cfg: DictConfig) -> None:
     """Entry point: check the composed config, then collect every dataset of it."""

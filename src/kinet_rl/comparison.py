@@ -4,8 +4,8 @@ Units and protocol are the same for every row: Table I is the forward error in m
 same held-out test sequences for every model of a camera, averaged over the sequences of each
 training seed, then mean ± 95% interval (Student's t) over training seeds; the detector floor
 reads object motion off the keypoints KINet detects in the true next frames. The MPC table is the
-ground-truth mean object distance to the goal after ``T`` pushes (mean ± standard error over the
-same episodes) and the success rate; Table II is KINet's MPC final distance per object count and
+ground-truth mean object distance to the goal after ``T`` pushes (mean ± 95% interval over the
+same episodes) and the success rate with its Wilson interval; Table II is KINet's MPC final distance per object count and
 geometry.
 """
 
@@ -17,8 +17,9 @@ from typing import Any
 
 from kinet_rl.evaluation.images import save_line_plot
 from kinet_rl.rearrangement.methods import METHODS
-from kinet_rl.rearrangement.report import plot_curves
+from kinet_rl.rearrangement.report import plot_curves, success_text
 from kinet_rl.rearrangement.settings import generalization_key
+from kinet_rl.stats import mean_interval
 
 #: Row labels of the tables.
 LABELS = {
@@ -34,28 +35,15 @@ LABELS = {
 }
 
 
-#: Two-sided 95% quantiles of Student's t by degrees of freedom (seeds - 1).
-T_975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262}
-
 #: A row's forward errors: one :func:`~kinet_rl.evaluation.forward.forward_errors` dict per seed.
 SeedErrors = Sequence[Mapping[str, Mapping[str, float]]]
-
-
-def seed_interval(values: Sequence[float]) -> tuple[float, float | None]:
-    """Mean and half-width of the 95% interval of the mean (Student's t; None for one value)."""
-    n = len(values)
-    mean = sum(values) / n
-    if n < 2:
-        return mean, None
-    std = (sum((v - mean) ** 2 for v in values) / (n - 1)) ** 0.5
-    return mean, T_975.get(n - 1, 1.96) * std / n**0.5
 
 
 def _forward_cell(per_seed: SeedErrors | None, horizon: int, key: str) -> str:
     values = [seed[str(horizon)][key] for seed in per_seed or () if key in seed[str(horizon)]]
     if not values:
         return "not run"
-    mean, half = seed_interval(values)
+    mean, half = mean_interval(values)
     return f"{mean * 1e3:.1f}" if half is None else f"{mean * 1e3:.1f} ± {half * 1e3:.1f}"
 
 
@@ -138,7 +126,7 @@ def mpc_table(
     num_steps: int,
     kinet_method: str,
 ) -> str:
-    """MPC table: final distance (mm, mean ± s.e.) and success rate; ``mpc[row]`` = episode stats.
+    """MPC table: final distance (mm, mean ± 95% interval) and success rate; ``mpc[row]`` = episode stats.
 
     ``kinet_method`` names the planner of the KINet rows (``kinet_graph`` or ``kinet_graph_distance``).
     """
@@ -155,8 +143,7 @@ def mpc_table(
         lines.append(
             f"| {LABELS.get(row, row)} | {planner} | {stats['episodes']} | "
             f"{stats['initial_distance'] * 1e3:.1f} | "
-            f"{_mm(stats, 'final_distance', 'final_distance_sem')} | "
-            f"{100 * stats['success_rate']:.0f}% |"
+            f"{_mm(stats, 'final_distance', 'final_distance_ci95')} | {success_text(stats)} |"
         )
     return "\n".join(lines)
 
@@ -177,7 +164,7 @@ def table_ii(
     num_objects: Sequence[int],
     geometries: Sequence[str],
 ) -> str:
-    """Table II: MPC final distance (mm, mean ± s.e.) per object count; ``cells[model][cell]``.
+    """Table II: MPC final distance (mm, mean ± 95% interval) per object count; ``cells[model][cell]``.
 
     One ``start`` column per geometry gives the episodes' initial distance (the same episodes for
     every model), so that a final distance can be read as an improvement or not.
@@ -197,7 +184,7 @@ def table_ii(
             _mm(
                 cells.get(m, {}).get(generalization_key(n, g)),
                 "final_distance",
-                "final_distance_sem",
+                "final_distance_ci95",
             )
             for m, g in columns
         ]
@@ -252,5 +239,5 @@ def plot_learning_curves(runs: Mapping[str, Sequence[Path]], path: Path, title: 
 
 
 def plot_mpc_curves(mpc: Mapping[str, Mapping[str, Any]], path: Path) -> Path:
-    """Mean distance to the goal (mm) after each push, one curve per row, with s.e. bands."""
+    """Mean distance to the goal (mm) after each push, one curve per row, with 95%-interval bands."""
     return plot_curves(dict(mpc), LABELS, path, "MPC: distance to goal")

@@ -18,7 +18,7 @@ import inspect
 import types
 from collections.abc import Collection, Iterator, Mapping
 from contextlib import contextmanager, suppress
-from dataclasses import fields
+from dataclasses import MISSING, fields
 from typing import Any, Literal, TypeVar, Union, get_args, get_origin, get_type_hints
 
 T = TypeVar("T")
@@ -187,8 +187,11 @@ def settings_from(cls: type[T], values: Mapping[str, Any], group: str = "") -> T
     The class's ``__post_init__`` checks the ranges; its errors name keys inside ``group``.
     """
     hints = get_type_hints(cls)
-    names = [f.name for f in fields(cls) if f.init]  # type: ignore[arg-type]
-    check_keys(values, names, group)
+    init_fields = [f for f in fields(cls) if f.init]  # type: ignore[arg-type]
+    check_keys(values, [f.name for f in init_fields], group)
+    for f in init_fields:
+        if f.name not in values and f.default is MISSING and f.default_factory is MISSING:
+            raise ConfigError(join(group, f.name), "missing; this key is required.")
     kwargs = {k: conform(join(group, k), v, hints[k]) for k, v in values.items()}
     with config_group(group):
         return cls(**kwargs)

@@ -10,14 +10,16 @@ from __future__ import annotations
 import functools
 import logging
 from collections.abc import Callable, Mapping
+from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import torch
 from torch import nn
+from torchrl.record.loggers import Logger
 
-from kinet_rl.atomic import atomic_write_json
+from kinet_rl.atomic import atomic_write_json, directory_lock
 from kinet_rl.config_schema import (
     ConfigError,
     check_arguments,
@@ -35,15 +37,17 @@ from kinet_rl.envs import make_env
 from kinet_rl.envs.factory import check_env_arguments
 from kinet_rl.envs.geometry import SceneGeometry
 from kinet_rl.envs.settings import SceneSettings
-from kinet_rl.evaluation.report import ReportSettings, TrainingReport
+from kinet_rl.evaluation.forward import keypoint_accuracy
+from kinet_rl.evaluation.report import ReportSettings, TrainingReport, hit_radius
+from kinet_rl.models.pretrained import model_card
 from kinet_rl.models.world_model import KINetWorldModel
-from kinet_rl.rearrangement.methods import check_methods
+from kinet_rl.rearrangement.methods import check_methods, check_model
 from kinet_rl.rearrangement.report import write_report
 from kinet_rl.rearrangement.runner import run_rearrangement
 from kinet_rl.rearrangement.settings import RearrangementSettings
 from kinet_rl.training.checkpoint import TrainingCheckpoint
-from kinet_rl.training.distributed import init_distributed
-from kinet_rl.training.loggers import LOGGER_KINDS, make_logger
+from kinet_rl.training.distributed import DistContext, init_distributed
+from kinet_rl.training.loggers import LOGGER_KINDS, MEDIA_SUFFIXES, log_media, make_logger
 from kinet_rl.training.loop import Trainer, TrainerSettings
 
 log = logging.getLogger(__name__)
@@ -74,6 +78,8 @@ LOSS_MODEL_ARGUMENT = "world_model"
 GENERALIZATION_KEYS = ("num_episodes", "env", "seed")
 #: Splits that training and its report read.
 TRAINING_SPLITS = ("train", "val", "test")
+#: Folder of an evaluation's finished episodes (an interrupted evaluation resumes from them).
+EPISODES_DIR = "episodes"
 
 
 @dataclass(frozen=True)
@@ -345,15 +351,31 @@ def evaluate_rearrangement(
     out_dir: str | Path,
     generalization: bool = False,
     progress: bool = False,
+    logger: Logger | None = None,
+    step: int = 0,
 ) -> dict[str, Any]:
     """Runs the rearrangement evaluation and writes its report (plot, markdown, JSON, GIFs).
+
+    With a ``logger``, the plots and GIFs also go to it, as ``rearrangement/<file stem>`` at
+    ``step``. ``out_dir`` is locked meanwhile; finished episodes are kept in
+    ``<out_dir>/episodes``, so that rerunning an interrupted evaluation runs only the missing ones.
 
     Returns:
         ``{"summary": {condition: {method: stats}}, "settings": ..., "files": [...]}``; the
         comparison's stats include ``final_distance`` (metres) and ``success_rate``.
     """
-    results = run_rearrangement(model, settings, generalization, progress)
-    files = write_report(Path(out_dir), results)
+    check_methods(settings)  # bad input fails before anything is written
+    check_model(settings.conditions(generalization), model)
+    out_dir = Path(out_dir)
+    with directory_lock(out_dir, "writing a rearrangement evaluation"):
+        results = run_rearrangement(
+            model, settings, generalization, progress, store_dir=out_dir / EPISODES_DIR
+        )
+        files = write_report(out_dir, results)
+    if logger is not None:
+        for path in files:
+            if path.suffix in MEDIA_SUFFIXES:
+                log_media(logger, f"rearrangement/{path.stem}", path, step)
     log.info("Rearrangement evaluation written to %s", out_dir)
     return {
         "summary": results.summary(),
@@ -383,10 +405,25 @@ def run_experiment(
 
     Returns:
         The numbers of ``results.json`` (empty on non-main processes).
+
+    Raises:
+        DirectoryInUseError: Another process is training in ``run_dir``.
     """
     run_dir = Path(run_dir)
     check_methods(settings.rearrangement)
     ctx = init_distributed(settings.device)
+    with directory_lock(run_dir, "training") if ctx.is_main else nullcontext():
+        return _train_and_evaluate(settings, build_model, build_loss, run_dir, ctx)
+
+
+def _train_and_evaluate(
+    settings: ExperimentSettings,
+    build_model: Callable[[], nn.Module],
+    build_loss: Callable[[nn.Module], nn.Module],
+    run_dir: Path,
+    ctx: DistContext,
+) -> dict[str, Any]:
+    """:func:`run_experiment` in its locked run directory."""
     torch.manual_seed(settings.seed + ctx.rank)
     if ctx.is_main:
         collect_datasets(settings.env, settings.data)
@@ -401,6 +438,7 @@ def run_experiment(
     loss = build_loss(model)
     scene = settings.scene
     geometry = SceneGeometry.of_scene(scene.task, scene.camera, scene.image_size)
+    logger = make_logger(settings.logger, run_dir, settings.name, None, settings.wandb_kwargs)
     report = TrainingReport(
         run_dir,
         settings.name,
@@ -410,6 +448,7 @@ def run_experiment(
         geometry,
         settings.report.horizons,
         settings.report.num_sequences,
+        logger,
     )
     trainer = Trainer(
         loss,
@@ -417,7 +456,7 @@ def run_experiment(
         data["val"],
         settings.trainer,
         TrainingCheckpoint(run_dir, settings.identity()),
-        make_logger(settings.logger, run_dir, settings.name, None, settings.wandb_kwargs),
+        logger,
         ctx,
         on_validate=report.on_validate,
     )
@@ -425,16 +464,52 @@ def run_experiment(
         log.info("Resumed %s at step %d", run_dir, trainer.step)
     trainer.fit()
     if not ctx.is_main:
+        logger.close()
         return {}
     model.save_checkpoint(run_dir / model_file(model), scene=scene)
     results = {**report.final(trainer.step), "world_size": ctx.world_size}
     episodes = settings.report.rearrangement_episodes
     if isinstance(model, KINetWorldModel) and episodes > 0:
         rearrangement = replace(settings.rearrangement, episodes=episodes)
-        summary = evaluate_rearrangement(model.cpu(), rearrangement, run_dir / "rearrangement")
+        summary = evaluate_rearrangement(
+            model.cpu(), rearrangement, run_dir / "rearrangement", logger=logger, step=trainer.step
+        )
         results["rearrangement"] = {
             condition: {method: stats["final_distance"] for method, stats in by_method.items()}
             for condition, by_method in summary["summary"].items()
         }
     atomic_write_json(run_dir / "results.json", results)
+    logger.close()  # flushes the last scalars and images
     return results
+
+
+def pretrained_keypoint_accuracy(name: str, work_dir: Path) -> float:
+    """Keypoint accuracy of shipped model ``name`` on episodes collected afresh into ``work_dir``.
+
+    Follows the ``check`` protocol of its model card (:func:`kinet_rl.models.model_card`): that
+    many random-push episodes of the card's scene and seed, every frame of them scored with the
+    training report's hit radius. The card's ``check.keypoint_accuracy`` was measured this way.
+    """
+    card = model_card(name)
+    check, scene = card["check"], SceneSettings.from_mapping(card["scene"])
+    env_config = {**scene.as_dict(), "max_steps": check["pushes_per_episode"]}
+    path = collect_dataset(
+        functools.partial(make_env, **env_config),
+        env_config,
+        root=work_dir,
+        name=f"check_{name}",
+        num_episodes=check["episodes"],
+        seed=check["seed"],
+        num_workers=1,
+        splits={"train": 1.0},
+        progress=False,
+    )
+    geometry = SceneGeometry.of_scene(scene.task, scene.camera, scene.image_size)
+    return keypoint_accuracy(
+        KINetWorldModel.from_pretrained(name),
+        load_dataset(path, "train"),
+        geometry,
+        hit_radius(scene.image_size),
+        num_frames=check["frames"],
+        seed=check["seed"],
+    )

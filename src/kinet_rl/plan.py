@@ -1,5 +1,7 @@
 """Next push for a real robot: ``python -m kinet_rl.plan --checkpoint kinet.pt --image now.png --goal goal.png``.
 
+``--checkpoint pretrained:blocks_topview`` uses the model shipped with the package (no training).
+
 Prints one JSON object: the push start and end in metres (table frame, origin at the workspace
 centre, +x right and +y up in the top camera image) and normalised to ``[-1, 1]``. Images must
 come from the camera and resolution the model was trained on. The planner's warm start lives
@@ -25,6 +27,7 @@ from kinet_rl.envs.settings import check_image_size
 from kinet_rl.envs.workspace import WORKSPACES
 from kinet_rl.models import REWARDS, KINetWorldModel, PushPlanner
 from kinet_rl.models.checkpointing import checkpoint_scene
+from kinet_rl.models.pretrained import resolve_checkpoint
 from kinet_rl.planners.graph_mpc import check_planner_settings
 
 logger = logging.getLogger(__name__)
@@ -68,7 +71,12 @@ def check_args(args: argparse.Namespace) -> None:
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     """Command-line arguments, checked before any model is loaded."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--checkpoint", type=Path, required=True, help="kinet.pt of a run")
+    parser.add_argument(
+        "--checkpoint",
+        required=True,
+        help="kinet.pt of a run, or pretrained:<name> for a shipped model (e.g. "
+        "pretrained:blocks_topview)",
+    )
     parser.add_argument("--image", type=Path, nargs="+", required=True, help="current image(s)")
     parser.add_argument("--goal", type=Path, required=True, help="goal image")
     parser.add_argument(
@@ -105,8 +113,9 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
 def main(argv: Sequence[str] | None = None) -> list[dict]:
     """Plans one push per ``--image`` and prints each as a JSON line."""
     args = parse_args(argv)
-    model = KINetWorldModel.from_checkpoint(args.checkpoint)
-    scene = checkpoint_scene(args.checkpoint)
+    checkpoint = resolve_checkpoint(args.checkpoint)
+    model = KINetWorldModel.from_checkpoint(checkpoint)
+    scene = checkpoint_scene(checkpoint)
     task = "blocks" if scene is None else scene.task
     half_size = args.workspace_half_size or WORKSPACES[task].half_size
     size = args.image_size or (None if scene is None else scene.image_size)

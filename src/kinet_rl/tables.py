@@ -7,20 +7,23 @@ overrides (``conf/tables/<scale>.yaml``); the row is trained with
 as every other row:
 
 * Table I: single-step forward error on held-out test sequences (same sequences per camera).
-* MPC table (``mpc_camera`` only): :func:`~kinet_rl.pipeline.evaluate_rearrangement`
-  with ``kinet_graph`` (KINet variants) or ``model_mpc`` (baselines), on the same episodes, plus
-  random pushes and the oracle.
-* Table II: the generalization cells (1-5 objects x train/gen geometry) of ``generalization_models``.
+* MPC tables (``mpc_camera`` only), one per planner budget of ``mpc_budgets`` (every row of a
+  table plans with the same budget): :func:`~kinet_rl.pipeline.evaluate_rearrangement` with the
+  eval group's ``kinet_method`` (KINet variants) or ``model_mpc`` (baselines), on the same
+  episodes, plus random pushes and the oracle.
+* Table II: the generalization cells (1-5 objects x train/gen geometry) of
+  ``generalization_models``, at the first budget.
 
 Every stage writes its JSON next to the row's run; re-running skips finished stages (a row's
-training is finished when its ``results.json`` exists). Writes ``<out>/tables.md`` and
-``<out>/mpc_curves.png``.
+training is finished when its ``results.json`` exists; an MPC result is redone when its
+evaluation settings changed). Writes ``<out>/tables.md`` and ``<out>/mpc_curves_<budget>.png``.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import re
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -33,7 +36,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import get_class, instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from kinet_rl.atomic import atomic_write_json, atomic_write_text
+from kinet_rl.atomic import atomic_write_json, atomic_write_text, directory_lock
 from kinet_rl.comparison import (
     LABELS,
     horizon_table,
@@ -43,11 +46,19 @@ from kinet_rl.comparison import (
     table_i,
     table_ii,
 )
-from kinet_rl.config_schema import ConfigError, check_keys, config_group, require, settings_from
+from kinet_rl.config_schema import (
+    ConfigError,
+    check_arguments,
+    check_keys,
+    config_group,
+    require,
+    settings_from,
+)
 from kinet_rl.configs import config_dir
 from kinet_rl.data import load_dataset
 from kinet_rl.envs.geometry import SceneGeometry
 from kinet_rl.evaluation.forward import forward_errors
+from kinet_rl.interrupts import exit_on_interrupt
 from kinet_rl.models import KINetWorldModel
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.pipeline import (
@@ -59,7 +70,9 @@ from kinet_rl.pipeline import (
     evaluate_rearrangement,
     run_experiment,
 )
+from kinet_rl.planners.graph_mpc import CODE_ARGUMENTS, GraphMPCPlanner, check_planner_settings
 from kinet_rl.rearrangement import RearrangementSettings
+from kinet_rl.rearrangement.report import budget_text
 
 logger = logging.getLogger(__name__)
 
@@ -74,14 +87,19 @@ EXPERIMENT_SUFFIX = {
     "visin": "_visin",
 }
 CAMERAS = ("top", "side")
+#: What a planner budget's name may be (it is part of file names, e.g. ``tables_mpc_64x3.json``).
+BUDGET_NAME = re.compile(r"[\w.-]+")
 
 
 @dataclass(frozen=True)
 class TablesSettings:
     """The ``tables`` config group (``conf/tables/<scale>.yaml``; each file documents its keys).
 
+    ``mpc_budgets`` maps a budget's name to planner settings that override each row's eval
+    planner; their keys and types are checked here, their ranges by :func:`check_rows`.
+
     Raises:
-        ConfigError: A model, camera or seed that no row can have, named.
+        ConfigError: A model, camera, seed or budget that no row can have, named.
     """
 
     scale: str
@@ -92,6 +110,7 @@ class TablesSettings:
     seeds: tuple[int, ...]
     forward_horizons: tuple[int, ...]
     forward_sequences: int
+    mpc_budgets: Mapping[str, Mapping[str, Any]]
     overrides: tuple[str, ...] = ()
     model_overrides: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
     eval: Mapping[str, Any] = field(default_factory=dict)
@@ -125,6 +144,15 @@ class TablesSettings:
             self.forward_sequences,
             "an integer of at least 1",
         )
+        require(
+            bool(self.mpc_budgets) and all(BUDGET_NAME.fullmatch(n) for n in self.mpc_budgets),
+            "mpc_budgets",
+            dict(self.mpc_budgets),
+            "a non-empty mapping from names (letters, digits, '_', '-', '.'; they name files) to "
+            "planner settings, e.g. {64x3: {num_candidates: 64, optim_steps: 3, top_k: 8}}",
+        )
+        for name, budget in self.mpc_budgets.items():  # keys and types; ranges: check_rows
+            check_arguments(GraphMPCPlanner, budget, f"mpc_budgets.{name}", exclude=CODE_ARGUMENTS)
 
     @classmethod
     def from_container(cls, values: Mapping[str, Any]) -> TablesSettings:
@@ -158,7 +186,8 @@ def row_config(tables: TablesSettings, model: str, camera: str, seed: int = 0) -
 
 def check_rows(tables: TablesSettings) -> None:
     """Composes and checks the config of every row (:func:`~kinet_rl.pipeline.check_config`,
-    and its evaluation with the scale's ``eval`` overrides) before any row trains.
+    its evaluation with the scale's ``eval`` overrides, and its planner under each of
+    ``mpc_budgets``) before any row trains.
 
     Raises:
         ConfigError: The first invalid entry, naming the row it was found in.
@@ -169,7 +198,10 @@ def check_rows(tables: TablesSettings) -> None:
             try:
                 check_config(to_dict(cfg))
                 with config_group("tables.eval"):  # the row's eval group, with these overrides
-                    rearrangement_settings(cfg, tables.eval)
+                    planner = rearrangement_settings(cfg, tables.eval).planner
+                for name, budget in tables.mpc_budgets.items():
+                    with config_group(f"tables.mpc_budgets.{name}"):
+                        check_planner_settings({**planner, **budget})
             except ConfigError as err:
                 raise ConfigError(
                     err.key,
@@ -186,11 +218,24 @@ def load_model(cfg: DictConfig, run_dir: Path) -> Any:
     return model.cpu().eval()
 
 
-def _cached(path: Path, compute) -> Any:
-    """The JSON at ``path``, computed and written first if missing (always read back: str keys)."""
-    if not path.is_file():
-        atomic_write_json(path, compute())
-    return json.loads(path.read_text())
+def _cached(path: Path, compute, settings: Mapping[str, Any] | None = None) -> Any:
+    """The JSON at ``path``, computed and written first if missing (always read back: str keys).
+
+    With ``settings`` the file also stores them, and is recomputed when they changed (e.g. an
+    MPC result of another protocol or budget is not reused).
+    """
+    if settings is None:
+        if not path.is_file():
+            atomic_write_json(path, compute())
+        return json.loads(path.read_text())
+    settings = json.loads(json.dumps(settings))  # the form it is read back in
+    stored = json.loads(path.read_text()) if path.is_file() else {}
+    if stored.get("settings") != settings:
+        if stored:
+            logger.info("Recomputing %s: its evaluation settings changed", path)
+        stored = {"settings": settings, "value": compute()}
+        atomic_write_json(path, stored)
+    return json.loads(json.dumps(stored["value"]))
 
 
 def to_dict(node: DictConfig) -> dict[str, Any]:
@@ -199,13 +244,20 @@ def to_dict(node: DictConfig) -> dict[str, Any]:
 
 
 def rearrangement_settings(
-    cfg: DictConfig, eval_overrides: Mapping[str, Any], methods: list[str] | None = None
+    cfg: DictConfig,
+    eval_overrides: Mapping[str, Any],
+    methods: list[str] | None = None,
+    budget: str | None = None,
+    tables: TablesSettings | None = None,
 ) -> RearrangementSettings:
-    """The row's eval group with the table scale's overrides and, if given, these methods."""
+    """The row's eval group with the table scale's overrides, and if given these methods and the
+    planner budget ``tables.mpc_budgets[budget]`` (merged onto the eval group's planner)."""
     container = to_dict(cfg)
     eval_cfg = {**container["eval"], **eval_overrides}
     if methods is not None:
         eval_cfg["methods"] = methods
+    if budget is not None and tables is not None:
+        eval_cfg["planner"] = {**eval_cfg["planner"], **tables.mpc_budgets[budget]}
     return RearrangementSettings.from_dicts(eval_cfg, container["env"])
 
 
@@ -253,46 +305,68 @@ def run_row(
             floor=floor,
         )
 
-    row: dict[str, Any] = {"forward": _cached(run_dir / "tables_forward.json", forward)}
+    row: dict[str, Any] = {"forward": _cached(run_dir / "tables_forward.json", forward), "mpc": {}}
     if camera == tables.mpc_camera and seed == tables.seeds[0]:
         kinet_method = rearrangement_settings(cfg, eval_overrides).kinet_method
         method = kinet_method if isinstance(net, KINetWorldModel) else "model_mpc"
-        generalization = model in tables.generalization_models
+        for i, budget in enumerate(tables.mpc_budgets):
+            # Table II and the backgrounds run at the first budget only.
+            generalization = i == 0 and model in tables.generalization_models
+            settings = rearrangement_settings(cfg, eval_overrides, [method], budget, tables)
 
-        def mpc() -> dict[str, Any]:
-            settings = rearrangement_settings(cfg, eval_overrides, [method])
-            start = time.monotonic()
-            summary = evaluate_rearrangement(
-                net, settings, run_dir / "tables_mpc", generalization, progress=True
-            )["summary"]
-            logger.info("MPC evaluation of %s took %.0f s", cfg.exp_name, time.monotonic() - start)
-            return {cond: by_method[method] for cond, by_method in summary.items()}
+            def mpc(
+                settings=settings, generalization=generalization, budget=budget
+            ) -> dict[str, Any]:
+                start = time.monotonic()
+                summary = evaluate_rearrangement(
+                    net, settings, run_dir / f"tables_mpc_{budget}", generalization, progress=True
+                )["summary"]
+                logger.info(
+                    "MPC of %s at %s took %.0f s", cfg.exp_name, budget, time.monotonic() - start
+                )
+                return {cond: by_method[method] for cond, by_method in summary.items()}
 
-        row["mpc"] = _cached(run_dir / "tables_mpc.json", mpc)
+            key = {"rearrangement": settings.as_dict(), "generalization": generalization}
+            row["mpc"][budget] = _cached(run_dir / f"tables_mpc_{budget}.json", mpc, key)
     return row
 
 
 def references(
-    tables: TablesSettings, out_dir: Path
+    tables: TablesSettings, out_dir: Path, budget: str
 ) -> tuple[dict[str, Any], RearrangementSettings]:
-    """Random pushes and the oracle on the MPC table's episodes (no model), and the settings."""
+    """Random pushes and the oracle on the MPC table's episodes at ``budget``, and the settings."""
     cfg = row_config(tables, tables.models[0], tables.mpc_camera)
-    settings = rearrangement_settings(cfg, tables.eval, ["random", "oracle"])
+    settings = rearrangement_settings(cfg, tables.eval, ["random", "oracle"], budget, tables)
 
     def compute() -> dict[str, Any]:
-        summary = evaluate_rearrangement(None, settings, out_dir / "references", progress=True)
+        summary = evaluate_rearrangement(
+            None, settings, out_dir / f"references_{budget}", progress=True
+        )
         return summary["summary"]["comparison"]
 
-    return _cached(out_dir / "references.json", compute), settings
+    stats = _cached(out_dir / f"references_{budget}.json", compute, settings.as_dict())
+    return stats, settings
 
 
 def build_tables(tables: TablesSettings, out_dir: Path) -> Path:
-    """Checks every row's config, runs every row (resuming), then writes ``tables.md`` and
-    ``mpc_curves.png``; returns the markdown path (needs an initialised Hydra)."""
+    """Checks every row's config, then (holding ``out_dir``'s lock) runs every row (resuming) and
+    writes ``tables.md`` and one ``mpc_curves_<budget>.png`` per planner budget; returns the
+    markdown path (needs an initialised Hydra).
+
+    Raises:
+        ConfigError: A row's config is invalid (nothing is written).
+        DirectoryInUseError: Another process is building tables in ``out_dir``.
+    """
     check_rows(tables)
+    with directory_lock(out_dir, "building the comparison tables"):
+        return _build_tables(tables, out_dir)
+
+
+def _build_tables(tables: TablesSettings, out_dir: Path) -> Path:
     forward: dict[str, dict[str, list[Any]]] = {}
     run_dirs: dict[str, dict[str, list[Path]]] = {}
-    mpc: dict[str, Any] = {}
+    budgets = list(tables.mpc_budgets)
+    mpc: dict[str, dict[str, Any]] = {budget: {} for budget in budgets}
     cells: dict[str, dict[str, Any]] = {}
     seeds = list(tables.seeds)
     rows = [(m, c, s) for s in seeds for c in tables.cameras for m in tables.models]
@@ -303,12 +377,34 @@ def build_tables(tables: TablesSettings, out_dir: Path) -> Path:
         run_dirs.setdefault(camera, {}).setdefault(LABELS.get(model, model), []).append(
             run_dir_of(out_dir, experiment_name(model, camera), seed)
         )
-        if "mpc" in row:
-            mpc[model] = row["mpc"]["comparison"]
-            cells[model] = {k: v for k, v in row["mpc"].items() if k != "comparison"}
-    reference_stats, settings = references(tables, out_dir)
-    mpc.update(reference_stats)
-    plot = plot_mpc_curves(mpc, out_dir / "mpc_curves.png")
+        for budget, by_condition in row["mpc"].items():
+            mpc[budget][model] = by_condition["comparison"]
+            if budget == budgets[0]:
+                cells[model] = {k: v for k, v in by_condition.items() if k != "comparison"}
+    mpc_sections, settings_of = [], {}
+    for budget in budgets:
+        reference_stats, settings = settings_of[budget] = references(tables, out_dir, budget)
+        mpc[budget].update(reference_stats)
+        plot = plot_mpc_curves(mpc[budget], out_dir / f"mpc_curves_{budget}.png")
+        mpc_sections += [
+            f"## MPC at the {budget} budget: distance to goal after T pushes "
+            f"({tables.mpc_camera} camera)",
+            "",
+            "Ground-truth mean object distance to its goal position, mm, mean ± 95% interval over "
+            "episodes (Student's t); success: every object within the success threshold at T "
+            f"(95% Wilson interval). Every row plans with {budget_text(settings.planner)}.",
+            "",
+            mpc_table(
+                mpc[budget],
+                [*tables.models, "random", "oracle"],
+                settings.task.num_steps,
+                settings.kinet_method,
+            ),
+            "",
+            f"![distance to goal]({plot.name})",
+            "",
+        ]
+    settings = settings_of[budgets[0]][1]
     curves = [
         plot_learning_curves(runs, out_dir / f"learning_curves_{camera}.png", f"{camera} camera")
         for camera, runs in run_dirs.items()
@@ -320,8 +416,8 @@ def build_tables(tables: TablesSettings, out_dir: Path) -> Path:
             f"Command: `python -m kinet_rl.tables tables={tables.scale}`; row configs: "
             "`+exp=blocks_<camera>view<suffix>` with the overrides of "
             f"`conf/tables/{tables.scale}.yaml`; training seeds {seeds}, test sequences seed 0, "
-            "rearrangement episodes seed 10000 + i (the same episodes for every row; MPC with the "
-            f"models of seed {seeds[0]}).",
+            f"rearrangement: {settings.split} episodes, seeds {settings.first_seed} + i (the same "
+            f"episodes for every row; MPC with the models of seed {seeds[0]}).",
             "",
             "## Table I: single-step forward error (BlockObjs, 3 objects)",
             "",
@@ -352,21 +448,9 @@ def build_tables(tables: TablesSettings, out_dir: Path) -> Path:
                     "",
                 )
             ],
-            f"## MPC: distance to goal after T pushes ({tables.mpc_camera} camera)",
-            "",
-            "Ground-truth mean object distance to its goal position, mm, mean ± standard error over "
-            "episodes; success: every object within the success threshold at T.",
-            "",
-            mpc_table(
-                mpc,
-                [*tables.models, "random", "oracle"],
-                settings.task.num_steps,
-                settings.kinet_method,
-            ),
-            "",
-            f"![distance to goal]({plot.name})",
-            "",
-            "## Table II: generalization (MPC final distance, mm, mean ± s.e.)",
+            *mpc_sections,
+            f"## Table II: generalization (MPC final distance at the {budgets[0]} budget, mm, mean "
+            "± 95% interval)",
             "",
             table_ii(
                 cells,
@@ -383,6 +467,7 @@ def build_tables(tables: TablesSettings, out_dir: Path) -> Path:
     return path
 
 
+@exit_on_interrupt("kinet_rl.tables")
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="tables")
 def main(cfg: DictConfig) -> None:
     """Entry point."""

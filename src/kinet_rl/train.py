@@ -18,6 +18,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from kinet_rl.configs import config_dir
+from kinet_rl.interrupts import exit_on_interrupt
 from kinet_rl.pipeline import check_config, run_experiment
 
 
@@ -33,6 +34,7 @@ def run(cfg: DictConfig, run_dir: Path) -> dict[str, Any]:
     )
 
 
+@exit_on_interrupt("kinet_rl.train")
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
 def main(cfg: DictConfig) -> None:
     """Entry point."""

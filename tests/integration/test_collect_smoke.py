@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import signal
 import subprocess
 import sys
@@ -14,6 +15,7 @@ import pytest
 import torch
 from tensordict import TensorDict
 
+from kinet_rl.atomic import DirectoryInUseError, directory_lock
 from kinet_rl.data import load_dataset
 
 pytestmark = pytest.mark.slow
@@ -26,17 +28,49 @@ def collect_command(root: Path, *overrides: str) -> list[str]:
     return [sys.executable, "-m", "kinet_rl.collect", "+exp=smoke", f"data.root={root}", *overrides]
 
 
-def run_collect(root: Path, *overrides: str) -> None:
-    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+def subprocess_env() -> dict[str, str]:
+    return {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+
+
+def run_collect(root: Path, *overrides: str, command: list[str] | None = None) -> None:
     result = subprocess.run(
-        collect_command(root, *overrides),
+        command or collect_command(root, *overrides),
         cwd=REPO,
-        env=env,
+        env=subprocess_env(),
         capture_output=True,
         text=True,
         timeout=240,
     )
     assert result.returncode == 0, result.stderr[-3000:]
+
+
+def committed(path: Path) -> int:
+    """Episodes committed so far to the dataset at ``path`` (0 before the first record)."""
+    progress = path / "progress.json"
+    return json.loads(progress.read_text())["committed"] if progress.exists() else 0
+
+
+def wait_for_commits(process: subprocess.Popen, dataset: Path, episodes: int) -> int:
+    """Waits until ``process`` has committed ``episodes`` to ``dataset``; returns the count."""
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and process.poll() is None:
+        if committed(dataset) >= episodes:
+            break
+        time.sleep(0.01)
+    return committed(dataset)
+
+
+def live_processes(session: int) -> list[int]:
+    """PIDs of the processes of a session that are still running (zombies are dead)."""
+    pids = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            state, _, _, sid = stat.read_text().rsplit(")", 1)[1].split()[:4]
+        except (OSError, IndexError):
+            continue  # the process ended while being read
+        if int(sid) == session and state != "Z":
+            pids.append(int(stat.parent.name))
+    return pids
 
 
 def stored(path: Path) -> TensorDict:
@@ -47,6 +81,14 @@ def stored(path: Path) -> TensorDict:
 def smoke_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("smoke")
     run_collect(root)
+    return root
+
+
+@pytest.fixture(scope="module")
+def main_only_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An uninterrupted collection of the ``MAIN_ONLY`` dataset, one worker."""
+    root = tmp_path_factory.mktemp("main_only")
+    run_collect(root, *MAIN_ONLY)
     return root
 
 
@@ -68,31 +110,66 @@ def test_rerun_of_a_complete_dataset_changes_nothing(smoke_root: Path) -> None:
     assert (smoke_root / "smoke" / "metadata.json").read_text() == before
 
 
-def test_killed_run_resumes_to_the_uninterrupted_dataset(tmp_path: Path) -> None:
-    full, killed = tmp_path / "full", tmp_path / "killed"
-    run_collect(full, *MAIN_ONLY)
-    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+def test_killed_run_resumes_to_the_uninterrupted_dataset(
+    main_only_root: Path, tmp_path: Path
+) -> None:
+    killed = tmp_path / "killed"
     process = subprocess.Popen(
         collect_command(killed, *MAIN_ONLY),
         cwd=REPO,
-        env=env,
+        env=subprocess_env(),
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
-    progress = killed / "smoke" / "progress.json"
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and process.poll() is None:
-        if progress.exists() and json.loads(progress.read_text())["committed"] >= 2:
-            process.send_signal(signal.SIGKILL)
-            break
-        time.sleep(0.01)
+    if wait_for_commits(process, killed / "smoke", 2) >= 2:
+        process.send_signal(signal.SIGKILL)
     process.wait(timeout=30)
     assert process.returncode == -signal.SIGKILL, "the run ended before it could be killed"
     assert not (killed / "smoke" / "metadata.json").exists()
-    run_collect(killed, *MAIN_ONLY)
-    assert (stored(killed / "smoke") == stored(full / "smoke")).all()
+    run_collect(killed, *MAIN_ONLY)  # the lock of the killed process does not block
+    assert (stored(killed / "smoke") == stored(main_only_root / "smoke")).all()
 
 
 def test_two_workers_give_the_same_data(smoke_root: Path, tmp_path: Path) -> None:
     run_collect(tmp_path, "data.generalization=null", "data.num_workers=2")
     assert (stored(tmp_path / "smoke") == stored(smoke_root / "smoke")).all()
+
+
+def test_ctrl_c_stops_two_workers_promptly_and_the_printed_command_resumes(
+    main_only_root: Path, tmp_path: Path
+) -> None:
+    interrupted = tmp_path / "interrupted"
+    command = collect_command(interrupted, *MAIN_ONLY, "data.num_workers=2")
+    with open(tmp_path / "stderr.txt", "w+") as stderr:
+        process = subprocess.Popen(
+            command,
+            cwd=REPO,
+            env=subprocess_env(),
+            stdout=subprocess.DEVNULL,
+            stderr=stderr,
+            start_new_session=True,  # its own process group, as a terminal's job
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # pytest may ignore it
+        )
+        seen = wait_for_commits(process, interrupted / "smoke", 2)
+        assert seen >= 2 and len(live_processes(process.pid)) >= 3, "no workers to interrupt"
+        busy = pytest.raises(DirectoryInUseError, match=f"PID {process.pid}\\) is collecting")
+        with busy, directory_lock(interrupted / "smoke", "collecting a dataset"):
+            pass
+        os.killpg(process.pid, signal.SIGINT)  # what Ctrl-C in a terminal does
+        start = time.monotonic()
+        process.wait(timeout=60)
+        stopped_after = time.monotonic() - start
+        stderr.seek(0)
+        output = stderr.read()
+    assert process.returncode == 130, output[-3000:]
+    assert stopped_after < 15, f"took {stopped_after:.1f} s to stop"
+    while live_processes(process.pid) and time.monotonic() < start + 20:
+        time.sleep(0.1)  # the resource tracker ends once its pipe closes
+    assert live_processes(process.pid) == [], "orphaned worker processes"
+    assert "Traceback" not in output, output[-3000:]
+    assert committed(interrupted / "smoke") >= seen
+    assert not (interrupted / "smoke" / "metadata.json").exists(), "the run ended by itself"
+    resume = shlex.split(output.strip().splitlines()[-1].split("run the same command again: ")[1])
+    assert resume == ["python", *command[1:]]
+    run_collect(interrupted, command=[sys.executable, *resume[1:]])
+    assert (stored(interrupted / "smoke") == stored(main_only_root / "smoke")).all()

@@ -16,6 +16,7 @@ from kinet_rl.envs import SceneSettings
 from kinet_rl.evaluate import evaluate
 from kinet_rl.models.checkpointing import checkpoint_scene
 from kinet_rl.pipeline import evaluate_rearrangement
+from kinet_rl.rearrangement import runner
 from kinet_rl.rearrangement.controllers import OracleController, RandomController
 from kinet_rl.rearrangement.episodes import make_episode, mean_goal_distance, run_episode
 from kinet_rl.rearrangement.settings import RearrangementSettings, TaskSettings
@@ -60,8 +61,8 @@ def test_oracle_mpc_beats_random_pushes_in_the_simulator() -> None:
     assert np.mean(finals["oracle"]) < 0.5 * np.mean(finals["random"])
 
 
-def test_evaluate_rearrangement_writes_plot_markdown_json_and_video(
-    tmp_path: Path, tiny_kinet
+def test_evaluate_rearrangement_writes_plot_markdown_json_and_video_and_resumes(
+    tmp_path: Path, tiny_kinet, monkeypatch
 ) -> None:
     settings = RearrangementSettings(
         scene=SCENE,
@@ -90,9 +91,16 @@ def test_evaluate_rearrangement_writes_plot_markdown_json_and_video(
         json.loads((tmp_path / "rearrangement.json").read_text())["summary"].keys()
         == summary.keys()
     )
-    video = iio.imread(tmp_path / f"rearrangement_seed{settings.seed}.gif")
+    video = iio.imread(tmp_path / f"rearrangement_seed{settings.first_seed}.gif")
     assert 1 <= video.shape[0] <= 4  # T + 1 frames (the GIF writer merges identical ones)
     assert video.shape[2] > 2 * video.shape[1] * 0.9
+    # A rerun (as after an interruption) takes every finished episode from the store.
+    episodes = sum(stats["episodes"] for cell in summary.values() for stats in cell.values())
+    assert len(list((tmp_path / "episodes").rglob("*.npz"))) == episodes
+    monkeypatch.setattr(runner, "run_job", None)  # no episode may run again
+    (tmp_path / f"rearrangement_seed{settings.first_seed}.gif").unlink()
+    assert evaluate_rearrangement(tiny_kinet(), settings, tmp_path, True)["summary"] == summary
+    assert (iio.imread(tmp_path / f"rearrangement_seed{settings.first_seed}.gif") == video).all()
 
 
 def test_plan_cli_prints_pushes_in_metres(tmp_path: Path, capsys, tiny_kinet) -> None:

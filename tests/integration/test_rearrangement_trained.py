@@ -1,5 +1,11 @@
-"""End to end: a KINet trained briefly in the simulator plans with GraphMPC at least 10 mm closer
-to the goal than random pushes (slow)."""
+"""End to end: GraphMPC with trained KINet models (slow).
+
+* The shipped cpu-scale model brings the blocks at least 15 mm closer to their goals than they
+  started, on validation episodes; a controller that does nothing fails this.
+* A KINet trained briefly here (400 steps, 32 px) plans at least 10 mm closer to the goal than
+  random pushes; it is not yet good enough to end below the start (measured: 80.6 mm from 66.2
+  with the embedding distance, 4 episodes, T = 20), which is why the first test exists.
+"""
 
 from __future__ import annotations
 
@@ -18,6 +24,24 @@ pytestmark = pytest.mark.slow
 
 REPO = Path(__file__).resolve().parents[2]
 SCENE = {"task": "blocks", "num_objects": 3, "camera": "top", "image_size": 32}
+
+
+def test_shipped_kinet_graph_mpc_ends_closer_to_the_goal_than_it_started(tmp_path: Path) -> None:
+    eval_settings = {
+        "episodes": 4,
+        "methods": ["kinet_graph_distance"],
+        "num_steps": 40,
+        "workers": 2,
+        "videos": 0,
+        "split": "validation",
+    }
+    scene = {**SCENE, "image_size": 64}
+    settings = RearrangementSettings.from_dicts(eval_settings, scene)
+    model = KINetWorldModel.from_pretrained("blocks_topview")
+    summary = evaluate_rearrangement(model, settings, tmp_path)["summary"]["comparison"]
+    stats = summary["kinet_graph_distance"]
+    start, final = 1e3 * stats["initial_distance"], 1e3 * stats["final_distance"]
+    assert final < start - 15.0, (start, final)
 
 
 def test_trained_kinet_graph_mpc_plans_closer_to_the_goal_than_random_pushes(
@@ -40,7 +64,7 @@ def test_trained_kinet_graph_mpc_plans_closer_to_the_goal_than_random_pushes(
         "num_steps": 10,
         "workers": 2,
         "videos": 0,
-        "seed": 10000,
+        "split": "validation",
     }
     settings = RearrangementSettings.from_dicts(eval_settings, SCENE)
     summary = evaluate_rearrangement(model, settings, tmp_path / "eval")["summary"]["comparison"]

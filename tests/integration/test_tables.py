@@ -71,8 +71,9 @@ def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, con
             "workers": 1,
             "videos": 0,
             "planner": tiny_planner,
-            "oracle_planner": tiny_planner,
         }
+        tables.mpc_budgets = {"8x1": {"num_candidates": 8, "optim_steps": 1, "top_k": 2},
+                              "16x2": {"num_candidates": 16, "optim_steps": 2, "top_k": 4}}  # fmt: skip
         tables.overrides = smoke_overrides(tmp_path)
         tables.model_overrides = {
             m: SMALL_KINET if m.startswith("kinet") else SMALL for m in models
@@ -96,16 +97,18 @@ def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, con
     assert "| Detector floor" in table_i and "| No motion" in table_i
     horizons = text.split("Moved objects after several open-loop pushes, top camera")[1]
     assert "| 3 pushes (mm) |" in horizons.split("## MPC")[0]
-    mpc = text.split("## MPC")[1].split("## Table II")[0]
-    assert (
-        len([line for line in mpc.splitlines() if line.startswith("| ") and "±" in line])
-        == len(models) + 2
-    )
+    sections = text.split("## MPC at the ")[1:]
+    assert [s.split(" ")[0] for s in sections] == ["8x1", "16x2"]  # one table per budget
+    for section, candidates in zip(sections, (8, 16), strict=True):
+        mpc = section.split("## Table II")[0]
+        assert f"Every row plans with {candidates} candidates" in mpc
+        rows = [line for line in mpc.splitlines() if line.startswith("| ") and "±" in line]
+        assert len(rows) == len(models) + 2
     table_ii = text.split("## Table II")[1]
     assert len([line for line in table_ii.splitlines() if line.count("±") == 4]) == 2
     numbers = [float(x) for x in re.findall(r"(-?\d+\.\d+) ± (\d+\.\d+)", text) for x in x]
     assert numbers and all(torch.isfinite(torch.tensor(numbers)))
-    assert (tmp_path / "mpc_curves.png").stat().st_size > 0
+    assert (tmp_path / "mpc_curves_8x1.png").stat().st_size > 0
     for camera in ("top", "side"):
         assert (tmp_path / f"learning_curves_{camera}.png").stat().st_size > 0
         assert f"learning_curves_{camera}.png" in text
@@ -114,7 +117,11 @@ def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, con
         assert set(forward) == {"1", "3"} and forward["1"]["no_motion"] > 0
     kinet = json.loads((tmp_path / "blocks_topview_seed1" / "tables_forward.json").read_text())
     assert kinet["1"]["floor"] > 0 and "floor_moved" in kinet["3"]
-    assert not (tmp_path / "blocks_topview_seed1" / "tables_mpc.json").exists()  # MPC: seed 0
+    assert not list((tmp_path / "blocks_topview_seed1").glob("tables_mpc*.json"))  # MPC: seed 0
+    # Table II at the first budget only; an MPC result of other settings is not reused.
+    larger = json.loads((tmp_path / "blocks_topview" / "tables_mpc_16x2.json").read_text())
+    assert set(larger["value"]) == {"comparison"}
+    assert larger["settings"]["rearrangement"]["planner"]["num_candidates"] == 16
 
 
 @pytest.mark.parametrize(

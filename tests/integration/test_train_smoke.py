@@ -68,6 +68,34 @@ def test_run_writes_model_report_images_and_logs(smoke_run: Path) -> None:
     assert model.detector.num_keypoints == 6
 
 
+def test_tensorboard_run_shows_images_and_rearrangement_gif(smoke_run: Path) -> None:
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    run = smoke_run / "run_tb"
+    tiny_eval = [
+        "report.rearrangement_episodes=1", "eval.num_steps=2", "eval.methods=[kinet_graph_distance]",
+        "eval.workers=1", "eval.videos=1", "eval.planner.num_candidates=8", "eval.planner.top_k=2",
+        "eval.planner.optim_steps=1",
+    ]  # fmt: skip
+    run_train(smoke_run, "logger=tensorboard", f"hydra.run.dir={run}", *tiny_eval)
+    (logdir,) = {p.parent for p in (run / "logs").rglob("events.out.tfevents.*")}
+    events = EventAccumulator(str(logdir), size_guidance={"images": 0, "scalars": 0})
+    events.Reload()
+    assert [e.step for e in events.Scalars("val/forward_error_1_mm")] == [3, 6]
+    images = {tag: events.Images(tag) for tag in events.Tags()["images"]}
+    assert [e.step for e in images["val/keypoints"]] == [3, 6]
+    assert [e.step for e in images["val/reconstruction"]] == [3, 6]
+    # What TensorBoard shows is the PNG the run wrote, byte for byte.
+    (final_keypoints,) = images["test/keypoints"]
+    expected = (run / "images" / "keypoints_final.png").read_bytes()
+    assert final_keypoints.encoded_image_string == expected and final_keypoints.step == 6
+    (video,) = images["rearrangement/rearrangement_seed10000"]
+    assert video.encoded_image_string[:6] == b"GIF89a" and video.step == 6
+    gif = run / "rearrangement" / "rearrangement_seed10000.gif"
+    assert video.encoded_image_string == gif.read_bytes()
+    assert "rearrangement/rearrangement" in images  # the distance-to-goal plot
+
+
 def test_rerun_resumes_and_longer_run_continues(smoke_run: Path) -> None:
     output = run_train(smoke_run, "trainer.steps=9")
     assert "Resumed" in output and "at step 6" in output

@@ -113,15 +113,16 @@ def test_controller_acts_in_bounds_through_the_method_registry(name: str, tiny_b
     assert np.abs(action).max() <= 1.0
 
 
-def test_wrong_model_kinds_are_refused_with_a_clear_error(tiny_baseline) -> None:
+def test_wrong_model_kinds_are_refused_with_a_clear_error(tiny_baseline, tmp_path) -> None:
     settings = RearrangementSettings(methods=("model_mpc",), planner=PLANNER)
     kinet_settings = RearrangementSettings(methods=("kinet_graph",), planner=PLANNER)
     with pytest.raises(TypeError, match="model_mpc"):
-        evaluate_rearrangement(tiny_baseline("in"), kinet_settings, "unused")
+        evaluate_rearrangement(tiny_baseline("in"), kinet_settings, tmp_path / "unused")
     with pytest.raises(TypeError, match="kinet_graph"):
         make_baseline_env(torch.nn.Linear(2, 2))
     with pytest.raises(ValueError, match="need a model"):
-        evaluate_rearrangement(None, settings, "unused")
+        evaluate_rearrangement(None, settings, tmp_path / "unused")
+    assert not (tmp_path / "unused").exists()  # refused before anything is written
     controller = BaselineMPCController(tiny_baseline("in"), PLANNER, 0)
     with pytest.raises(RuntimeError, match="reset"):
         controller.act(observation(0))

@@ -140,13 +140,17 @@ REFUSED = {
     "eval type": (["eval.episodes=one"], "eval.episodes", "got 'one', expected an integer"),
     "eval range": (["eval.num_objects=[1,9]"], "eval.num_objects", "integers from 1 to 5"),
     "eval unknown": (["+eval.epsiodes=3"], "eval.epsiodes", "did you mean episodes?"),
+    "eval split": (["eval.split=train"], "eval.split", "got 'train', expected one of 'validation'"),
+    # the oracle plans with eval.planner and the split sets the seeds: these keys are gone
+    "eval old oracle": (["+eval.oracle_planner.top_k=8"], "eval.oracle_planner", "unknown key"),
+    "eval old seed": (["+eval.seed=3"], "eval.seed", "allowed keys: "),
     "eval method": (["eval.methods=[kinet_grpah]"], "eval", "Unknown methods ['kinet_grpah']"),
     "planner range": (
         ["eval.planner.top_k=100"],
         "eval.planner.top_k",
         "at most num_candidates=64",
     ),
-    "planner type": (["eval.oracle_planner.top_k=x"], "eval.oracle_planner.top_k", "got 'x'"),
+    "planner type": (["eval.planner.optim_steps=x"], "eval.planner.optim_steps", "got 'x'"),
     "planner unknown": (["+eval.planner.topk=1"], "eval.planner.topk", "did you mean top_k?"),
     # logger
     "logger type": (["logger.wandb_kwargs=3"], "logger.wandb_kwargs", "expected a mapping"),
@@ -173,6 +177,19 @@ def test_each_group_refuses_bad_values_naming_them(overrides, key, fragment) -> 
         (["tables.mpc_camera=front"], "tables.mpc_camera", "expected one of cameras"),
         (["tables.models=[kinet,forwards]"], "tables.models", "names from ['kinet'"),
         (["+tables.model=[kinet]"], "tables.model", "did you mean models?"),
+        (
+            ["~tables.mpc_budgets", "+tables.mpc_budgets={}"],
+            "tables.mpc_budgets",
+            "expected a non-empty mapping",
+        ),
+        (["+tables.mpc_budgets={a/b: {top_k: 2}}"], "tables.mpc_budgets", "they name files"),
+        (
+            ["+tables.mpc_budgets={cheap: {topk: 2}}"],
+            "tables.mpc_budgets.cheap.topk",
+            "did you mean top_k?",
+        ),
+        (["+tables.mpc_budgets={cheap: {top_k: x}}"], "tables.mpc_budgets.cheap.top_k", "got 'x'"),
+        (["~tables.mpc_budgets"], "tables.mpc_budgets", "missing; this key is required"),
     ],
 )
 def test_the_tables_group_refuses_bad_values_naming_them(overrides, key, fragment) -> None:
@@ -193,6 +210,12 @@ def test_a_bad_row_override_is_refused_before_any_row_trains(tmp_path: Path, mon
             build_tables(bad, tmp_path)
         with pytest.raises(ConfigError, match="tables.eval.episodes: got 0"):
             check_rows(dataclasses.replace(tables, eval={**tables.eval, "episodes": 0}))
+        # a budget's range is checked on each row's planner under it (top_k <= num_candidates)
+        wide = {"64x3": {"top_k": 100}}
+        with pytest.raises(
+            ConfigError, match="tables.mpc_budgets.64x3.top_k: got 100, expected at most num_c"
+        ):
+            check_rows(dataclasses.replace(tables, mpc_budgets=wide))
     assert list(tmp_path.iterdir()) == []
 
 

@@ -1,15 +1,22 @@
-"""Collection into on-disk datasets with the fake push env: splits, resumption, unstable runs."""
+"""Collection into on-disk datasets with the fake push env: splits, resumption, unstable runs,
+interruptions, a full disk and a second collector in the same folder."""
 
 from __future__ import annotations
 
+import errno
 import functools
+import json
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 import torch
 from tensordict import TensorDict
 
+import kinet_rl.data.collection
 from fake_push_env import make_fake_env
+from kinet_rl.atomic import DirectoryInUseError, DiskFullError, directory_lock
 from kinet_rl.data import (
     DatasetIncompleteError,
     DatasetMismatchError,
@@ -17,7 +24,7 @@ from kinet_rl.data import (
     load_dataset,
     split_ranges,
 )
-from kinet_rl.data.storage import EPISODES_DIR, EpisodeWriter
+from kinet_rl.data.storage import EPISODES_DIR, PROGRESS_FILE, EpisodeWriter
 
 ENV_CONFIG = {"task": "fake", "camera": "top", "image_size": 8}
 
@@ -120,3 +127,76 @@ def test_unknown_backend_and_distributed_options_are_refused(tmp_path: Path) -> 
     with pytest.raises(ValueError, match="distributed.frames_per_batch: unknown key"):
         collect(tmp_path, "bad", backend="distributed", distributed={"frames_per_batch": 3})
     assert not (tmp_path / "bad").exists()
+
+
+class InterruptedCollector:
+    """A collector that is interrupted (KeyboardInterrupt) while its caller waits for batch ``n``."""
+
+    def __init__(self, collector: Any, batches: int) -> None:
+        self.collector, self.batches = collector, batches
+
+    def __iter__(self) -> Iterator[Any]:
+        for i, batch in enumerate(self.collector):
+            if i == self.batches:
+                raise KeyboardInterrupt
+            yield batch
+
+    def shutdown(self, timeout: float | None = None) -> None:
+        self.collector.shutdown(timeout=timeout)
+
+
+def progress_of(path: Path) -> dict[str, Any]:
+    return json.loads((path / PROGRESS_FILE).read_text())
+
+
+def test_an_interrupt_keeps_every_finished_episode_and_resumes(
+    reference: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    make_collector = kinet_rl.data.collection.make_collector
+    monkeypatch.setattr(
+        kinet_rl.data.collection,
+        "make_collector",
+        lambda *args, **kwargs: InterruptedCollector(make_collector(*args, **kwargs), 5),
+    )
+    with pytest.raises(KeyboardInterrupt):
+        collect(tmp_path, "interrupted")  # chunks of 3, one episode per batch
+    progress = progress_of(tmp_path / "interrupted")
+    assert progress["processed"] == 5  # the open chunk was committed, not lost
+    assert progress["committed"] == 5 - progress["discarded_unstable"] > 3
+    monkeypatch.undo()
+    collect(tmp_path, "interrupted")
+    assert (stored(tmp_path / "interrupted") == stored(reference)).all()
+
+
+def test_a_full_disk_midway_keeps_the_last_commit_and_resumes(
+    reference: Path, tmp_path: Path, full_disk: Callable[[int], None], monkeypatch
+) -> None:
+    full_disk(2)  # the first progress record and the first chunk's fit, the second chunk's not
+    with pytest.raises(DiskFullError, match=f"Cannot write {tmp_path / 'full' / PROGRESS_FILE}"):
+        collect(tmp_path, "full")
+    assert progress_of(tmp_path / "full")["committed"] == 3
+    monkeypatch.undo()
+    collect(tmp_path, "full")
+    assert (stored(tmp_path / "full") == stored(reference)).all()
+
+
+def test_a_dataset_too_large_for_the_disk_fails_before_collecting(
+    reference: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def no_space(fd: int, offset: int, length: int) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr("os.posix_fallocate", no_space)
+    with pytest.raises(DiskFullError, match="Not enough disk space under .*huge for the dataset"):
+        collect(tmp_path, "huge")
+    assert sorted(p.name for p in (tmp_path / "huge").iterdir()) == [".lock"]
+    monkeypatch.undo()
+    collect(tmp_path, "huge")  # nothing stale is left in the way
+    assert (stored(tmp_path / "huge") == stored(reference)).all()
+
+
+def test_a_second_collection_into_the_same_folder_is_refused(tmp_path: Path) -> None:
+    with directory_lock(tmp_path / "busy", "collecting a dataset"):
+        with pytest.raises(DirectoryInUseError, match="busy is in use.*is collecting a dataset"):
+            collect(tmp_path, "busy")
+        assert not (tmp_path / "busy" / PROGRESS_FILE).exists()

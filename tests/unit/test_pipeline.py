@@ -9,11 +9,12 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
+from kinet_rl.atomic import DirectoryInUseError, directory_lock
 from kinet_rl.configs import config_dir
 from kinet_rl.envs import SceneSettings
 from kinet_rl.models import KINetWorldModel
 from kinet_rl.models.checkpointing import checkpoint_scene
-from kinet_rl.pipeline import ExperimentSettings
+from kinet_rl.pipeline import ExperimentSettings, run_experiment
 
 EXPERIMENTS = sorted(p.stem for p in (Path(config_dir()) / "exp").glob("*.yaml"))
 
@@ -72,3 +73,15 @@ def test_episode_negatives_without_grouped_batches_are_refused_before_work():
     with pytest.raises(ValueError, match="trainer.horizon=1"):
         settings_of("trainer.horizon=1")  # the default rollout loss needs the following pushes
     assert settings_of("trainer.horizon=1", "loss.rollout_weight=0").trainer.horizon == 1
+
+
+def test_a_second_training_run_in_the_same_directory_is_refused_before_any_work(tmp_path):
+    settings = settings_of("+exp=smoke", f"data.root={tmp_path / 'data'}")
+
+    def never(*args):
+        raise AssertionError("nothing may be built in a busy run directory")
+
+    busy = pytest.raises(DirectoryInUseError, match="run is in use.*is training there")
+    with directory_lock(tmp_path / "run", "training"), busy:
+        run_experiment(settings, never, never, tmp_path / "run")
+    assert not (tmp_path / "data").exists()  # refused before collecting

@@ -20,7 +20,10 @@ def test_markdown_lists_methods_and_the_generalization_table() -> None:
     }
     labels = {name: METHODS[name].label for name in ("kinet_graph", "random")}
     text = markdown(RearrangementResults(settings, episodes, labels), "plot.png")
-    assert "| KINet-GraphMPC (paper S, cosine) | 1 | 80.0 | 12.0 ± 0.0 | 100% |" in text
+    # One success in one episode: 100% with the Wilson interval [21, 100].
+    assert "| KINet-GraphMPC (paper S, cosine) | 1 | 80.0 | 12.0 ± 0.0 | 100% [21, 100] |" in text
+    assert "Test episodes, seeds 50000 + i" in text
+    assert "Planner of every method: 64 candidates x 3 iterations (top 8), horizon 1" in text
     assert "| 1 | 12.0 ± 0.0 (80.0) |" in text and "| 2 | - |" in text
     assert "![distance to goal](plot.png)" in text
 

@@ -26,6 +26,11 @@ def test_summary_statistics() -> None:
     assert stats["final_distance"] == pytest.approx(0.03)
     assert stats["final_distance_sem"] == pytest.approx(np.std([0.02, 0.04], ddof=1) / np.sqrt(2))
     assert stats["success_rate"] == 0.5 and stats["mean_curve"][0] == pytest.approx(0.1)
+    # 95% intervals: Student's t with 1 dof over episodes; Wilson for the success rate.
+    assert stats["final_distance_ci95"] == pytest.approx(12.706 * stats["final_distance_sem"])
+    assert stats["ci95_curve"][0] == 0.0  # every episode starts at 0.1
+    low, high = stats["success_ci95"]
+    assert 0.0 < low < 0.5 < high < 1.0
 
 
 def test_results_summarize_each_condition_by_name() -> None:

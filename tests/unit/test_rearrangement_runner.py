@@ -1,9 +1,17 @@
-"""Tests for the runner's jobs (no simulation)."""
+"""Tests for the runner's jobs and its store of finished episodes (no simulation)."""
 
 from __future__ import annotations
 
-from kinet_rl.rearrangement.runner import make_jobs
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from kinet_rl.rearrangement import runner
+from kinet_rl.rearrangement.results import EpisodeResult
+from kinet_rl.rearrangement.runner import Job, make_jobs, run_rearrangement
 from kinet_rl.rearrangement.settings import RearrangementSettings
+from kinet_rl.rearrangement.store import EpisodeStore
 
 
 def test_jobs_share_seeds_across_methods_and_record_videos() -> None:
@@ -14,7 +22,7 @@ def test_jobs_share_seeds_across_methods_and_record_videos() -> None:
     seeds = {m: [j.seed for j in jobs if j.method == m] for m in settings.methods}
     assert all(s == seeds["random"] for s in seeds.values())
     assert [(j.method, j.seed) for j in jobs if j.record] == [
-        (settings.kinet_method, settings.seed)
+        (settings.kinet_method, settings.first_seed)
     ]
     cells = [
         j for j in make_jobs(settings, settings.conditions()) if j.condition.role != "comparison"
@@ -22,3 +30,69 @@ def test_jobs_share_seeds_across_methods_and_record_videos() -> None:
     assert {j.condition.name for j in cells} == {"n2_geom_train", "n2_geom_gen"}
     assert {j.method for j in cells} == {settings.kinet_method}
     assert not any(j.record for j in cells)  # videos come from the comparison only
+
+
+def fake_episode(job: Job, settings: RearrangementSettings, model: object) -> EpisodeResult:
+    """An episode outcome determined by its method and seed, as a real episode's is."""
+    rng = np.random.default_rng([job.seed, len(job.method)])
+    distances = np.sort(rng.uniform(0, 0.1, settings.task.num_steps + 1))[::-1]
+    return EpisodeResult(job.method, job.seed, distances, bool(distances[-1] < 0.02), False)
+
+
+class CountingEpisodes:
+    """A stand-in of ``run_job``: fake episodes, the names of those it ran, and a Ctrl-C
+    (KeyboardInterrupt) instead of episode number ``interrupt_at``."""
+
+    def __init__(self, interrupt_at: int | None = None) -> None:
+        self.ran: list[str] = []
+        self.interrupt_at = interrupt_at
+
+    def __call__(self, job: Job, settings: RearrangementSettings, model: object) -> EpisodeResult:
+        if len(self.ran) == self.interrupt_at:
+            raise KeyboardInterrupt
+        self.ran.append(job.name)
+        return fake_episode(job, settings, model)
+
+
+def test_an_interrupted_evaluation_resumes_from_its_stored_episodes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    settings = RearrangementSettings(episodes=3, methods=("random", "oracle"), workers=1)
+    monkeypatch.setattr(runner, "run_job", fake_episode)
+    straight = run_rearrangement(None, settings).summary()
+    first, second = CountingEpisodes(interrupt_at=2), CountingEpisodes()
+    monkeypatch.setattr(runner, "run_job", first)
+    with pytest.raises(KeyboardInterrupt):
+        run_rearrangement(None, settings, store_dir=tmp_path)
+    monkeypatch.setattr(runner, "run_job", second)
+    assert run_rearrangement(None, settings, store_dir=tmp_path).summary() == straight
+    assert len(first.ran) == 2 and len(second.ran) == 4  # the stored episodes did not rerun
+    assert not set(first.ran) & set(second.ran)
+
+
+def test_stored_episodes_round_trip_and_belong_to_one_model_and_settings(
+    tmp_path: Path, tiny_kinet
+) -> None:
+    settings = RearrangementSettings(episodes=2)
+    rng = np.random.default_rng(0)
+    result = EpisodeResult(
+        "kinet_graph", 10_001, rng.uniform(size=5), True, False,
+        frames=[rng.integers(0, 255, (8, 8, 3), dtype=np.uint8) for _ in range(5)],
+        keypoints=[rng.uniform(-1, 1, (4, 2)) for _ in range(5)],
+        goal_pixels=rng.integers(0, 255, (8, 8, 3), dtype=np.uint8),
+        goal_keypoints=rng.uniform(-1, 1, (4, 2)),
+    )  # fmt: skip
+    EpisodeStore(tmp_path, settings, tiny_kinet(0)).save("comparison/kinet_graph/seed10001", result)
+    loaded = EpisodeStore(tmp_path, settings, tiny_kinet(0)).load(
+        "comparison/kinet_graph/seed10001"
+    )
+    assert loaded is not None and (loaded.method, loaded.seed) == (result.method, result.seed)
+    assert (loaded.success, loaded.unstable) == (True, False)
+    for name in ("distances", "frames", "keypoints", "goal_pixels", "goal_keypoints"):
+        np.testing.assert_array_equal(
+            np.asarray(getattr(loaded, name)), np.asarray(getattr(result, name))
+        )
+    other_weights = EpisodeStore(tmp_path, settings, tiny_kinet(1))
+    other_settings = EpisodeStore(tmp_path, RearrangementSettings(episodes=3), tiny_kinet(0))
+    assert other_weights.load("comparison/kinet_graph/seed10001") is None
+    assert other_settings.load("comparison/kinet_graph/seed10001") is None

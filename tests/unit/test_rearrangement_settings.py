@@ -46,6 +46,15 @@ def test_condition_names_follow_their_role() -> None:
     assert Condition(scene, "background", ("random",), 1).name == "background_random"
 
 
+def test_validation_and_test_episodes_have_disjoint_seeds(yaml_settings) -> None:
+    assert yaml_settings().split == "test"  # what the docs report
+    validation, test = yaml_settings(split="validation"), yaml_settings(split="test")
+    seeds = [range(s.first_seed, s.first_seed + 1000) for s in (validation, test)]
+    assert not set(seeds[0]) & set(seeds[1])
+    with pytest.raises(ValueError, match="split: got 'train', expected one of 'validation'"):
+        yaml_settings(split="train")
+
+
 def test_unknown_settings_are_reported(yaml_settings) -> None:
     with pytest.raises(ValueError, match="episodez: unknown key"):
         yaml_settings(episodez=3)

@@ -1,7 +1,10 @@
-"""Trainer: resumption gives the uninterrupted run, NaN stops the run and keeps the checkpoint."""
+"""Trainer: resumption gives the uninterrupted run, NaN, Ctrl-C and a full disk keep the checkpoint."""
 
 from __future__ import annotations
 
+import os
+import signal
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -9,7 +12,8 @@ import torch
 from tensordict import TensorDict
 from torch import nn
 
-from kinet_rl.atomic import CheckpointError
+from kinet_rl.atomic import CheckpointError, DiskFullError
+from kinet_rl.interrupts import Interrupted
 from kinet_rl.training import TrainingCheckpoint
 from kinet_rl.training.loggers import make_logger
 from kinet_rl.training.loop import DivergenceError, Trainer, TrainerSettings
@@ -40,8 +44,26 @@ class RegressionLoss(nn.Module):
         return TensorDict({"loss_mse": loss}, batch_size=[])
 
 
+class SignallingData(LinearData):
+    """Linear data whose ``at``-th batch comes with ``signals`` sent to this process."""
+
+    def __init__(self, at: int, signals: list[int]) -> None:
+        self.at, self.signals, self.calls = at, signals, 0
+
+    def sample(self, batch_size: int, generator: torch.Generator | None = None) -> TensorDict:
+        self.calls += 1
+        if self.calls == self.at:
+            for signum in self.signals:
+                os.kill(os.getpid(), signum)
+        return super().sample(batch_size, generator)
+
+
 def make_trainer(
-    run_dir: Path, steps: int, loss: nn.Module | None = None, seed: int = 0
+    run_dir: Path,
+    steps: int,
+    loss: nn.Module | None = None,
+    seed: int = 0,
+    train_data: LinearData | None = None,
 ) -> Trainer:
     torch.manual_seed(seed)
     settings = TrainerSettings(
@@ -50,7 +72,7 @@ def make_trainer(
     )  # fmt: skip
     return Trainer(
         loss or RegressionLoss(),
-        LinearData(),
+        train_data or LinearData(),
         LinearData(),
         settings,
         TrainingCheckpoint(run_dir, {"exp": "linear"}),
@@ -66,18 +88,57 @@ def test_training_lowers_the_loss(tmp_path: Path) -> None:
     assert after < before / 20
 
 
-def test_resumed_run_equals_uninterrupted_run(tmp_path: Path) -> None:
-    straight = make_trainer(tmp_path / "straight", steps=8)
+def assert_resumes_to_the_uninterrupted_run(run_dir: Path, from_step: int) -> None:
+    """Resuming ``run_dir`` (stopped at ``from_step``) to 8 steps equals 8 uninterrupted steps."""
+    straight = make_trainer(run_dir.parent / "straight", steps=8)
     straight.fit()
-    first = make_trainer(tmp_path / "split", steps=4)
-    first.fit()
-    resumed = make_trainer(tmp_path / "split", steps=8, seed=123)  # other init: must be overwritten
-    assert resumed.resume() and resumed.step == 4
+    resumed = make_trainer(run_dir, steps=8, seed=123)  # other init: must be overwritten
+    assert resumed.resume() and resumed.step == from_step
     resumed.fit()
     for a, b in zip(
         straight.loss_module.parameters(), resumed.loss_module.parameters(), strict=True
     ):
         torch.testing.assert_close(a, b)
+
+
+def test_resumed_run_equals_uninterrupted_run(tmp_path: Path) -> None:
+    make_trainer(tmp_path / "split", steps=4).fit()
+    assert_resumes_to_the_uninterrupted_run(tmp_path / "split", from_step=4)
+
+
+def last_step(run_dir: Path) -> int:
+    state = TrainingCheckpoint(run_dir, {"exp": "linear"}).load_latest()
+    assert state is not None
+    return int(state["step"])
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_stop_signal_finishes_the_step_saves_it_and_resumes_exactly(
+    tmp_path: Path, signum: int
+) -> None:
+    interrupted = make_trainer(tmp_path / "split", steps=8, train_data=SignallingData(3, [signum]))
+    with pytest.raises(Interrupted) as caught:
+        interrupted.fit()
+    assert caught.value.signum == signum
+    assert last_step(tmp_path / "split") == 3  # the periodic checkpoint was at step 2
+    assert_resumes_to_the_uninterrupted_run(tmp_path / "split", from_step=3)
+
+
+def test_a_second_signal_stops_at_once_and_keeps_the_last_checkpoint(tmp_path: Path) -> None:
+    signals = [signal.SIGINT, signal.SIGINT]
+    trainer = make_trainer(tmp_path, steps=8, train_data=SignallingData(3, signals))
+    with pytest.raises(Interrupted):
+        trainer.fit()
+    assert trainer.step == 2 and last_step(tmp_path) == 2
+
+
+def test_a_full_disk_keeps_the_last_checkpoint(
+    tmp_path: Path, full_disk: Callable[[int], None]
+) -> None:
+    full_disk(1)  # the checkpoint of step 2 fits, the one of step 4 does not
+    with pytest.raises(DiskFullError, match="checkpoints/last.pt: no space left"):
+        make_trainer(tmp_path, steps=4).fit()
+    assert last_step(tmp_path) == 2
 
 
 def test_nan_loss_stops_and_keeps_last_good_checkpoint(tmp_path: Path) -> None:

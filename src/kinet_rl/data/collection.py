@@ -8,7 +8,7 @@ import inspect
 import logging
 import platform
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -17,8 +17,10 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.collectors import Collector, MultiSyncCollector
 from torchrl.collectors.distributed import DistributedCollector
 from torchrl.envs import EnvBase, StepCounter
+from torchrl.weight_update import NoWeightSyncScheme
 from tqdm import tqdm
 
+from kinet_rl.atomic import directory_lock
 from kinet_rl.config_schema import check_arguments, check_keys, config_group, invalid, require
 from kinet_rl.data.policy import (
     EPISODE_ID,
@@ -28,6 +30,7 @@ from kinet_rl.data.policy import (
     read_workspace_half_size,
 )
 from kinet_rl.data.storage import FORMAT_VERSION, METADATA_FILE, EpisodeWriter, read_json
+from kinet_rl.interrupts import worker_processes
 from kinet_rl.keys import (
     ACTION,
     NEXT_OBJECT_POS,
@@ -48,6 +51,8 @@ BACKENDS = ("local", "distributed")
 UNBOUNDED_FRAMES = 2**62
 # DistributedCollector arguments that make_collector sets itself.
 DISTRIBUTED_FIXED_ARGS = ("create_env_fn", "policy", "frames_per_batch", "total_frames", "sync")
+#: Seconds the workers get to stop when collection ends or is interrupted (then terminated).
+SHUTDOWN_SECONDS = 5.0
 
 
 def seeded_env(
@@ -225,8 +230,14 @@ def make_collector(
         )
     if num_workers == 1:
         return Collector(env_fns[0], policy, frames_per_batch=episode_length, **common)
+    # The random-push policy has no weights to send; the default shared-memory scheme would
+    # also hang the interpreter's exit after an interrupt (its finalizer starts a thread).
     return MultiSyncCollector(
-        env_fns, policy, frames_per_batch=episode_length * num_workers, **common
+        env_fns,
+        policy,
+        frames_per_batch=episode_length * num_workers,
+        weight_sync_schemes={"policy": NoWeightSyncScheme()},
+        **common,
     )
 
 
@@ -251,7 +262,9 @@ def collect_dataset(
 
     Episode ``i`` of the run is fully determined by ``(seed, i)``: the same seed gives the same
     dataset for any ``num_workers``, and an interrupted run continues from its last committed
-    chunk. Unstable episodes are discarded, counted, and replaced by later ones.
+    episode. Ctrl-C or SIGTERM commits the finished episodes, then stops the workers (within
+    ``SHUTDOWN_SECONDS``) and raises ``KeyboardInterrupt``. Unstable episodes are discarded,
+    counted, and replaced by later ones. The folder is locked while collecting.
 
     Args:
         env_fn: picklable zero-argument env factory (e.g. ``functools.partial(make_env, ...)``).
@@ -261,7 +274,7 @@ def collect_dataset(
         num_episodes: stable episodes to keep.
         seed: seed of the run.
         num_workers: env worker processes (1 collects in this process).
-        chunk_episodes: episodes written per commit (the work lost to an interruption).
+        chunk_episodes: episodes written per commit (the most work a killed process loses).
         splits: fractions per split name, assigned as contiguous episode ranges.
         policy: keyword arguments of :class:`RandomPushPolicy` (without the workspace size).
         workspace_half_size: metres; read from the env when None.
@@ -274,6 +287,10 @@ def collect_dataset(
 
     Returns:
         The dataset folder.
+
+    Raises:
+        DirectoryInUseError: Another process is collecting into the same folder.
+        DiskFullError: The disk cannot hold the dataset (checked before collecting).
     """
     path = Path(root) / name
     if (path / METADATA_FILE).exists():
@@ -290,83 +307,120 @@ def collect_dataset(
         backend,
         distributed,
     )
-    ranges = split_ranges(num_episodes, splits)
-    probe = env_fn()
-    try:
-        episode_length = episode_length_of(probe)
-        image_size = int(probe.observation_spec[PIXELS].shape[-2])
-        num_objects = int(probe.observation_spec[OBJECT_POS].shape[-2])
-        if workspace_half_size is None:
-            workspace_half_size = read_workspace_half_size(probe)
-    finally:
-        probe.close()
-    push_policy = RandomPushPolicy(workspace_half_size, **(policy or {}))
-    settings = {
-        "env": dict(env_config),
-        "seed": seed,
-        "num_episodes": num_episodes,
-        "episode_length": episode_length,
-        "image_size": image_size,
-        "num_objects": num_objects,
-        "workspace_half_size": workspace_half_size,
-        "policy": dict(policy or {}),
-        "splits": splits,
-    }
-    writer = EpisodeWriter(path, num_episodes, episode_length, image_size, num_objects, settings)
-    assembler = EpisodeAssembler(writer.processed, episode_length)
-    discarded, buffer = writer.discarded, []
-    collector = make_collector(
-        env_fn,
-        push_policy,
-        seed,
-        writer.processed,
-        num_workers,
-        episode_length,
-        backend=backend,
-        distributed=distributed,
-    )
-    bar = tqdm(total=num_episodes, initial=writer.committed, desc=name, disable=not progress)
-    start = time.perf_counter()
-    try:
-        for batch in collector:
-            assembler.add(batch)
-            for index, episode in assembler.pop_ready():
-                if episode is None:
-                    discarded += 1
-                    continue
-                buffer.append(episode)
-                full = writer.committed + len(buffer) == num_episodes
-                if len(buffer) == chunk_episodes or full:
-                    writer.commit(torch.stack(buffer), index + 1, discarded)
-                    bar.update(len(buffer))
-                    buffer = []
-                if full:
-                    break
-            if writer.committed == num_episodes:
-                break
-            if discarded > max(10, max_discard_fraction * assembler.next_episode):
-                raise RuntimeError(
-                    f"{discarded} of {assembler.next_episode} episodes went unstable; check the "
-                    "env's physics settings (kept data so far is in place and will resume)."
-                )
-    finally:
-        collector.shutdown()
-        bar.close()
-    writer.finalize(
-        {
-            "format_version": FORMAT_VERSION,
-            "complete": True,
-            "name": name,
-            **settings,
-            "splits": ranges,
-            "split_fractions": splits,
-            "num_workers": num_workers,
-            "backend": backend,
-            "discarded_unstable": discarded,
-            "processed_episodes": writer.processed,
-            "versions": package_versions(),
-            "collection_seconds_last_run": time.perf_counter() - start,
+    with directory_lock(path, "collecting a dataset"):
+        if (path / METADATA_FILE).exists():  # completed by the process that held the lock
+            return path
+        ranges = split_ranges(num_episodes, splits)
+        probe = env_fn()
+        try:
+            episode_length = episode_length_of(probe)
+            image_size = int(probe.observation_spec[PIXELS].shape[-2])
+            num_objects = int(probe.observation_spec[OBJECT_POS].shape[-2])
+            if workspace_half_size is None:
+                workspace_half_size = read_workspace_half_size(probe)
+        finally:
+            probe.close()
+        push_policy = RandomPushPolicy(workspace_half_size, **(policy or {}))
+        settings = {
+            "env": dict(env_config),
+            "seed": seed,
+            "num_episodes": num_episodes,
+            "episode_length": episode_length,
+            "image_size": image_size,
+            "num_objects": num_objects,
+            "workspace_half_size": workspace_half_size,
+            "policy": dict(policy or {}),
+            "splits": splits,
         }
-    )
+        writer = EpisodeWriter(
+            path, num_episodes, episode_length, image_size, num_objects, settings
+        )
+        bar = tqdm(total=num_episodes, initial=writer.committed, desc=name, disable=not progress)
+        start = time.perf_counter()
+        start_collector = functools.partial(
+            make_collector,
+            env_fn,
+            push_policy,
+            seed,
+            writer.processed,
+            num_workers,
+            episode_length,
+            backend=backend,
+            distributed=distributed,
+        )
+        try:
+            with worker_processes(
+                start_collector, lambda collector: collector.shutdown(timeout=SHUTDOWN_SECONDS)
+            ) as collector:
+                discarded = fill_writer(
+                    writer, collector, episode_length, chunk_episodes, max_discard_fraction, bar
+                )
+        finally:
+            bar.close()
+        writer.finalize(
+            {
+                "format_version": FORMAT_VERSION,
+                "complete": True,
+                "name": name,
+                **settings,
+                "splits": ranges,
+                "split_fractions": splits,
+                "num_workers": num_workers,
+                "backend": backend,
+                "discarded_unstable": discarded,
+                "processed_episodes": writer.processed,
+                "versions": package_versions(),
+                "collection_seconds_last_run": time.perf_counter() - start,
+            }
+        )
     logger.info("Dataset %s complete: %s", path, read_json(path / METADATA_FILE)["splits"])
     return path
+
+
+def fill_writer(
+    writer: EpisodeWriter,
+    collector: Iterable[TensorDictBase],
+    episode_length: int,
+    chunk_episodes: int,
+    max_discard_fraction: float,
+    bar: tqdm,
+) -> int:
+    """Commits the collector's stable episodes to ``writer`` until it is full; returns the discards.
+
+    Episodes are committed in chunks of ``chunk_episodes``. A Ctrl-C or SIGTERM that arrives
+    while waiting for the collector (nearly all of the time) first commits the finished
+    episodes of the open chunk, so that no completed episode is lost.
+    """
+    assembler = EpisodeAssembler(writer.processed, episode_length)
+    discarded = writer.discarded
+    buffer: list[TensorDictBase] = []
+    batches = iter(collector)
+    while writer.committed < writer.num_episodes:
+        try:
+            batch = next(batches)
+        except KeyboardInterrupt:
+            if buffer:  # every popped episode is handled: the state is consistent here
+                writer.commit(torch.stack(buffer), assembler.next_episode, discarded)
+                logger.info("Interrupted: %s kept at %d episodes.", writer.path, writer.committed)
+            raise
+        assembler.add(batch)
+        for index, episode in assembler.pop_ready():
+            if episode is None:
+                discarded += 1
+                continue
+            buffer.append(episode)
+            full = writer.committed + len(buffer) == writer.num_episodes
+            if len(buffer) == chunk_episodes or full:
+                writer.commit(torch.stack(buffer), index + 1, discarded)
+                bar.update(len(buffer))
+                buffer = []
+            if full:
+                break
+        if writer.committed < writer.num_episodes and discarded > max(
+            10, max_discard_fraction * assembler.next_episode
+        ):
+            raise RuntimeError(
+                f"{discarded} of {assembler.next_episode} episodes went unstable; check the "
+                "env's physics settings (kept data so far is in place and will resume)."
+            )
+    return discarded

@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import shutil
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,7 @@ from typing import Any
 import torch
 from tensordict import TensorDict, TensorDictBase
 
-from kinet_rl.atomic import atomic_write_json
+from kinet_rl.atomic import DISK_FULL_ERRNOS, DiskFullError, atomic_write_json
 from kinet_rl.keys import ACTION, OBJECT_POS, OBJECT_YAW, PIXELS
 
 logger = logging.getLogger(__name__)
@@ -107,7 +108,7 @@ class EpisodeWriter:
 
     Args:
         path: dataset folder ``<root>/<name>``.
-        num_episodes: episodes the finished dataset holds (storage is preallocated, sparse).
+        num_episodes: episodes the finished dataset holds (disk space is reserved up front).
         episode_length: pushes per episode T.
         image_size: frame side H = W.
         num_objects: objects per scene N.
@@ -152,8 +153,33 @@ class EpisodeWriter:
                 batch_size=[num_episodes],
             )
             self.storage = template.memmap_like(self.path / EPISODES_DIR)
+            self._allocate()
             self.committed = self.processed = self.discarded = 0
             self._write_progress()
+
+    def _allocate(self) -> None:
+        """Reserves the array files' disk space now, so that a full disk fails before collecting.
+
+        Memory-mapped writes into an unallocated (sparse) file on a full disk would kill the
+        process with SIGBUS instead of raising an error.
+        """
+        files = [self.path / EPISODES_DIR / f"{name}.memmap" for name in self.specs]
+        sizes = [file.stat().st_size for file in files]
+        for file, size in zip(files, sizes, strict=True):
+            with open(file, "rb+") as f:
+                try:
+                    os.posix_fallocate(f.fileno(), 0, size)
+                except OSError as err:
+                    if err.errno not in DISK_FULL_ERRNOS:
+                        raise
+                    shutil.rmtree(self.path / EPISODES_DIR)
+                    raise DiskFullError(
+                        err.errno,
+                        f"Not enough disk space under {self.path} for the dataset's "
+                        f"{sum(sizes) / 1e9:.2f} GB ({self.num_episodes} episodes). Free space "
+                        "there, or collect fewer episodes (data.num_episodes) or elsewhere "
+                        "(data.root), then run the command again.",
+                    ) from err
 
     def _write_progress(self) -> None:
         atomic_write_json(

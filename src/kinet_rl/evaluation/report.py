@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from torchrl.record.loggers import Logger
 
 from kinet_rl.atomic import atomic_write_text
 from kinet_rl.config_schema import at_least, require
@@ -22,6 +23,7 @@ from kinet_rl.evaluation.forward import (
 )
 from kinet_rl.evaluation.images import draw_keypoints, image_grid, save_png, upscale
 from kinet_rl.keys import ACTION, NEXT_PIXELS, PIXELS, PIXELS_0
+from kinet_rl.training.loggers import log_media
 
 log = logging.getLogger(__name__)
 
@@ -95,12 +97,15 @@ def summary_images(model, dataset, geometry: SceneGeometry, seed: int = 0) -> di
     return {"keypoints": image_grid([overlays]), "reconstruction": image_grid(grid)}
 
 
-def write_summaries(run_dir: Path, model, dataset, geometry: SceneGeometry, tag: str) -> list[Path]:
+def write_summaries(
+    run_dir: Path, model, dataset, geometry: SceneGeometry, tag: str
+) -> dict[str, Path]:
     """Saves :func:`summary_images` as ``images/<name>_<tag>.png`` in the run directory."""
     images = summary_images(model, dataset, geometry)
-    return [
-        save_png(image, run_dir / "images" / f"{name}_{tag}.png") for name, image in images.items()
-    ]
+    return {
+        name: save_png(image, run_dir / "images" / f"{name}_{tag}.png")
+        for name, image in images.items()
+    }
 
 
 @dataclass
@@ -116,6 +121,8 @@ class TrainingReport:
         geometry: Image <-> table geometry of the experiment's camera.
         horizons: Pushes ahead at which forward prediction is scored.
         num_sequences: Test sequences per forward-prediction score.
+        logger: The run's TorchRL logger; the image summaries go to it too (``val/<name>`` at
+            each validation, ``test/<name>`` at the end), not only to ``images/``.
     """
 
     run_dir: Path
@@ -126,6 +133,7 @@ class TrainingReport:
     geometry: SceneGeometry
     horizons: tuple[int, ...] = (1, 5, 10)
     num_sequences: int = 256
+    logger: Logger | None = None
 
     @property
     def has_keypoints(self) -> bool:
@@ -149,9 +157,18 @@ class TrainingReport:
         scores = {"val/forward_error_1_mm": 1e3 * errors["model"]}
         scores["val/forward_error_1_moved_mm"] = 1e3 * errors["model_moved"]
         if self.has_keypoints:
-            write_summaries(self.run_dir, self.model, self.val, self.geometry, f"step{step:06d}")
+            self.write_images(self.val, "val", f"step{step:06d}", step)
             scores["val/keypoint_accuracy"] = self.accuracy(self.val)
         return scores
+
+    def write_images(self, dataset, split: str, tag: str, step: int) -> list[Path]:
+        """Writes the image summaries of ``dataset`` (:func:`write_summaries`) and logs them as
+        ``<split>/<name>`` at ``step``; returns the files."""
+        paths = write_summaries(self.run_dir, self.model, dataset, self.geometry, tag)
+        if self.logger is not None:
+            for name, path in paths.items():
+                log_media(self.logger, f"{split}/{name}", path, step)
+        return list(paths.values())
 
     def final(self, step: int) -> dict:
         """Evaluates on the test split, writes ``report.md`` and final images; returns the numbers."""
@@ -185,7 +202,7 @@ class TrainingReport:
         )
         sections.append(forward_table(errors, image_mse, self.model_name) + "\n")
         if self.has_keypoints:
-            paths = write_summaries(self.run_dir, self.model, self.test, self.geometry, "final")
+            paths = self.write_images(self.test, "test", "final", step)
             sections.append("\n".join(f"![{p.stem}](images/{p.name})" for p in paths) + "\n")
         atomic_write_text(self.run_dir / "report.md", "\n".join(sections))
         log.info("Wrote %s", self.run_dir / "report.md")

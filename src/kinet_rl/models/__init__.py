@@ -22,6 +22,7 @@ from kinet_rl.models.model_env import (
     KINetReward,
     chamfer_distance,
 )
+from kinet_rl.models.pretrained import model_card, pretrained_names
 from kinet_rl.models.push_planner import Push, PushPlanner
 from kinet_rl.models.transforms import KeypointTransform
 from kinet_rl.models.world_model import KINetWorldModel, TransitionOutputs
@@ -49,4 +50,6 @@ __all__ = [
     "edge_geometry",
     "graph_info_nce",
     "graph_similarity",
+    "model_card",
+    "pretrained_names",
 ]

@@ -29,6 +29,7 @@ from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.models.interaction import GraphPrediction, KeypointInteractionNet
 from kinet_rl.models.keypoints import KeypointDetector, KeypointReconstructor, pixels_to_input
 from kinet_rl.models.object_rollout import DetectorFloor, KeypointObjectRollout
+from kinet_rl.models.pretrained import pretrained_path
 
 log = logging.getLogger(__name__)
 
@@ -128,6 +129,12 @@ class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
         self.interaction = KeypointInteractionNet(
             feat_dim, embed_dim, hidden_dim, num_hidden, num_rounds, deterministic, action_frame
         )
+
+    @classmethod
+    def from_pretrained(cls, name: str) -> KINetWorldModel:
+        """A model shipped with the package (:func:`~kinet_rl.models.pretrained.pretrained_names`;
+        its card: :func:`~kinet_rl.models.pretrained.model_card`), in eval mode."""
+        return cls.from_checkpoint(pretrained_path(name)).eval()
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         """Predicts the next keypoints for ``ACTION`` (see the class ``Keys:``)."""

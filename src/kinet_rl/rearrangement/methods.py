@@ -106,9 +106,7 @@ def _kinet(reward: Callable[[], KINetReward]) -> Callable[[MethodContext], Contr
 
 def _oracle(ctx: MethodContext) -> Controller:
     settings = ctx.settings
-    return OracleController(
-        ctx.scene, settings.oracle_planner, settings.oracle_contact_radius, ctx.seed
-    )
+    return OracleController(ctx.scene, settings.planner, settings.oracle_contact_radius, ctx.seed)
 
 
 METHODS: dict[str, Method] = {

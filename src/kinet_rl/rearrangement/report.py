@@ -20,7 +20,7 @@ VIDEO_SCALE = 4
 def plot_curves(
     by_method: Mapping[str, Mapping[str, Any]], labels: Mapping[str, str], path: Path, title: str
 ) -> Path:
-    """Mean distance to goal (mm) over pushes with a standard-error band, one line per method."""
+    """Mean distance to goal (mm) over pushes with its 95%-interval band, one line per method."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -29,10 +29,10 @@ def plot_curves(
     fig, ax = plt.subplots(figsize=(6, 4))
     for method, stats in by_method.items():
         mean = np.asarray(stats["mean_curve"]) * 1e3
-        sem = np.asarray(stats["sem_curve"]) * 1e3
+        half = np.asarray(stats["ci95_curve"]) * 1e3
         steps = np.arange(len(mean))
         ax.plot(steps, mean, label=f"{labels.get(method, method)} (n={stats['episodes']})")
-        ax.fill_between(steps, mean - sem, mean + sem, alpha=0.2)
+        ax.fill_between(steps, mean - half, mean + half, alpha=0.2)
     return save_line_plot(fig, ax, path, "push t", "mean object distance to goal [mm]", title)
 
 
@@ -48,7 +48,9 @@ def markdown(results: RearrangementResults, plot_name: str) -> str:
         f"T = {task.num_steps} pushes; goals made by {task.goal_pushes} random object pushes from "
         f"the start (reachable). Distances are ground truth, mean over objects, in mm; success = "
         f"every object within {task.success_threshold * 1e3:.0f} mm of its goal at T. "
-        f"KINet planner: {dict(settings.planner)}.",
+        f"Mean ± 95% interval over episodes (Student's t; success: Wilson). "
+        f"{settings.split.capitalize()} episodes, seeds {settings.first_seed} + i. "
+        f"Planner of every method: {budget_text(settings.planner)}.",
         "",
         f"![distance to goal]({plot_name})",
         "",
@@ -59,8 +61,7 @@ def markdown(results: RearrangementResults, plot_name: str) -> str:
         for method, stats in results.stats(condition).items():
             lines.append(
                 f"| {labels.get(method, method)} | {stats['episodes']} | "
-                f"{stats['initial_distance'] * 1e3:.1f} | {_final(stats)} | "
-                f"{stats['success_rate'] * 100:.0f}% |"
+                f"{stats['initial_distance'] * 1e3:.1f} | {_final(stats)} | {success_text(stats)} |"
             )
     kinet = labels.get(settings.kinet_method, settings.kinet_method)
     cells = {
@@ -100,8 +101,23 @@ def markdown(results: RearrangementResults, plot_name: str) -> str:
 def _final(stats: dict[str, Any] | None, with_start: bool = False) -> str:
     if stats is None:
         return "-"
-    text = f"{stats['final_distance'] * 1e3:.1f} ± {stats['final_distance_sem'] * 1e3:.1f}"
+    text = f"{stats['final_distance'] * 1e3:.1f} ± {stats['final_distance_ci95'] * 1e3:.1f}"
     return f"{text} ({stats['initial_distance'] * 1e3:.1f})" if with_start else text
+
+
+def success_text(stats: Mapping[str, Any]) -> str:
+    """A success rate with its 95% Wilson interval, e.g. ``45% [26, 66]``."""
+    low, high = stats["success_ci95"]
+    return f"{100 * stats['success_rate']:.0f}% [{100 * low:.0f}, {100 * high:.0f}]"
+
+
+def budget_text(planner: Mapping[str, Any]) -> str:
+    """A planner budget in words, e.g. ``64 candidates x 3 iterations (top 8), horizon 1, cem``."""
+    text = (
+        f"{planner['num_candidates']} candidates x {planner['optim_steps']} iterations "
+        f"(top {planner['top_k']}), horizon {planner.get('planning_horizon', 1)}"
+    )
+    return f"{text}, {planner['update_rule']}" if "update_rule" in planner else text
 
 
 def video_frames(result: EpisodeResult) -> list[np.ndarray]:

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from kinet_rl.rearrangement.settings import Condition, RearrangementSettings
+from kinet_rl.stats import t_975, wilson_interval
 
 #: ``{condition name: {method: stats}}`` as in ``rearrangement.json``.
 Summary = dict[str, dict[str, dict[str, Any]]]
@@ -29,18 +30,27 @@ class EpisodeResult:
 
 
 def summarize(episodes: list[EpisodeResult]) -> dict[str, Any]:
-    """Mean and standard error of the distance curve, final distance and success rate."""
+    """Mean, standard error and 95% interval of the distance curve and final distance; success rate.
+
+    The distance interval is Student's t over episodes (zero for one episode); the success
+    interval is Wilson's.
+    """
     curves = np.stack([r.distances for r in episodes])  # [E, T + 1]
     n = len(episodes)
     sem = curves.std(0, ddof=1) / np.sqrt(n) if n > 1 else np.zeros(curves.shape[1])
+    half = sem * (t_975(n - 1) if n > 1 else 0.0)
+    successes = sum(r.success for r in episodes)
     return {
         "episodes": n,
         "mean_curve": curves.mean(0).tolist(),
         "sem_curve": sem.tolist(),
+        "ci95_curve": half.tolist(),
         "initial_distance": float(curves[:, 0].mean()),
         "final_distance": float(curves[:, -1].mean()),
         "final_distance_sem": float(sem[-1]),
-        "success_rate": float(np.mean([r.success for r in episodes])),
+        "final_distance_ci95": float(half[-1]),
+        "success_rate": successes / n,
+        "success_ci95": list(wilson_interval(successes, n)),
         "unstable": int(sum(r.unstable for r in episodes)),
     }
 

@@ -2,27 +2,38 @@
 
 Every episode is a job ``(condition, method, seed)``; jobs run in a ``spawn`` process pool
 (each worker rebuilds the model from its weights once and uses one torch thread) or inline with
-``workers <= 1``. Episode ``i`` of a condition uses seed ``seed + i`` for its scene and goal,
-the same for every method, so methods are compared on identical episodes. Writing reports is the
-caller's (:mod:`kinet_rl.rearrangement.report`).
+``workers <= 1``; the workers ignore Ctrl-C, and an interrupted run terminates them. Episode
+``i`` of a condition uses seed ``first_seed + i`` (by split) for its scene and goal, the same for
+every method, so methods are compared on identical episodes. Finished episodes can be kept on
+disk (:mod:`kinet_rl.rearrangement.store`) so that an interrupted evaluation resumes. Writing
+reports is the caller's (:mod:`kinet_rl.rearrangement.report`).
 """
 
 from __future__ import annotations
 
+import functools
 import importlib
+import logging
 import multiprocessing
+import multiprocessing.pool
 from collections.abc import Iterable
+from contextlib import closing
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, cast
 
 import torch
 from tqdm import tqdm
 
+from kinet_rl.interrupts import worker_processes
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.rearrangement.episodes import make_episode, run_episode
 from kinet_rl.rearrangement.methods import METHODS, MethodContext, check_methods, check_model
 from kinet_rl.rearrangement.results import EpisodeResult, RearrangementResults
 from kinet_rl.rearrangement.settings import Condition, RearrangementSettings
+from kinet_rl.rearrangement.store import EpisodeStore
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -33,6 +44,11 @@ class Job:
     method: str
     seed: int
     record: bool
+
+    @property
+    def name(self) -> str:
+        """The episode's name in an :class:`EpisodeStore`."""
+        return f"{self.condition.name}/{self.method}/seed{self.seed}"
 
 
 _WORKER_MODEL: torch.nn.Module | None = None
@@ -95,19 +111,29 @@ def make_jobs(settings: RearrangementSettings, conditions: Iterable[Condition]) 
                     and method == settings.kinet_method
                     and i < settings.videos
                 )
-                jobs.append(Job(condition, method, settings.seed + i, record))
+                jobs.append(Job(condition, method, settings.first_seed + i, record))
     return jobs
 
 
 def _outcomes(jobs: list[Job], settings: RearrangementSettings, model: torch.nn.Module | None):
-    if settings.workers <= 1:
+    if settings.workers <= 1 or not jobs:
         for job in jobs:
             yield job, run_job(job, settings, model)
         return
     payload = None if model is None else _model_payload(model)
-    context = multiprocessing.get_context("spawn")
-    with context.Pool(settings.workers, initializer=_init_worker, initargs=(payload,)) as pool:
+    start = functools.partial(
+        multiprocessing.get_context("spawn").Pool,
+        settings.workers,
+        initializer=_init_worker,
+        initargs=(payload,),
+    )
+    with worker_processes(start, _stop_pool) as pool:
         yield from pool.imap_unordered(_run_job_in_worker, [(j, settings) for j in jobs])
+
+
+def _stop_pool(pool: multiprocessing.pool.Pool) -> None:
+    pool.terminate()
+    pool.join()
 
 
 def run_rearrangement(
@@ -115,6 +141,7 @@ def run_rearrangement(
     settings: RearrangementSettings,
     generalization: bool = False,
     progress: bool = False,
+    store_dir: Path | None = None,
 ) -> RearrangementResults:
     """Runs the rearrangement evaluation; checks every method and the model before any episode.
 
@@ -124,6 +151,8 @@ def run_rearrangement(
         settings: The evaluation's settings.
         generalization: Also run the Table II cells and extra backgrounds.
         progress: Show a progress bar over episodes.
+        store_dir: Keeps every finished episode there (:class:`EpisodeStore`), so that a rerun
+            after an interruption runs only the missing episodes; None keeps nothing.
     """
     check_methods(settings)
     conditions = settings.conditions(generalization)
@@ -132,8 +161,30 @@ def run_rearrangement(
     episodes: dict[Condition, dict[str, list[EpisodeResult]]] = {
         c: {method: [] for method in c.methods} for c in conditions
     }
-    with tqdm(total=len(jobs), desc="rearrangement episodes", disable=not progress) as bar:
-        for job, result in _outcomes(jobs, settings, model):
+    store = None if store_dir is None else EpisodeStore(store_dir, settings, model)
+    todo = []
+    for job in jobs:
+        stored = None if store is None else store.load(job.name)
+        if stored is None:
+            todo.append(job)
+        else:
+            episodes[job.condition][job.method].append(stored)
+    if store is not None and len(todo) < len(jobs):
+        log.info(
+            "Resuming: %d of %d episodes are in %s", len(jobs) - len(todo), len(jobs), store.dir
+        )
+    with (
+        closing(_outcomes(todo, settings, model)) as outcomes,  # closing stops the workers
+        tqdm(
+            total=len(jobs),
+            initial=len(jobs) - len(todo),
+            desc="rearrangement episodes",
+            disable=not progress,
+        ) as bar,
+    ):
+        for job, result in outcomes:
+            if store is not None:
+                store.save(job.name, result)
             episodes[job.condition][job.method].append(result)
             bar.update()
     for by_method in episodes.values():

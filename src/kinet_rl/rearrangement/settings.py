@@ -14,9 +14,24 @@ from kinet_rl.envs.settings import BACKGROUNDS, GEOMETRIES, MAX_OBJECTS, SceneSe
 from kinet_rl.planners.graph_mpc import check_planner_settings
 
 #: The comparison's methods by default (names of :data:`kinet_rl.rearrangement.methods.METHODS`).
-DEFAULT_METHODS = ("kinet_graph", "kinet_graph_distance", "kinet_keypoints", "random", "oracle")
+DEFAULT_METHODS = (
+    "kinet_graph",
+    "kinet_graph_dot",
+    "kinet_graph_distance",
+    "kinet_keypoints",
+    "kinet_keypoints_l2",
+    "random",
+    "oracle",
+)
 
 Role = Literal["comparison", "generalization", "background"]
+Split = Literal["validation", "test"]
+
+#: Seed of the first episode of each split: episode ``i`` uses ``SPLIT_SEEDS[split] + i``. Costs,
+#: planner settings and defaults are chosen on validation episodes and reported on test episodes,
+#: which are never looked at while choosing (up to 40,000 validation episodes stay disjoint).
+#: Training data never uses these seeds: collection seeds episodes by a hash of (run seed, index).
+SPLIT_SEEDS: dict[str, int] = {"validation": 10_000, "test": 50_000}
 
 
 @dataclass(frozen=True)
@@ -88,15 +103,16 @@ class RearrangementSettings:
         task: Task and metric settings.
         episodes: Episodes per method in the comparison.
         methods: Methods of the comparison (names in ``kinet_rl.rearrangement.METHODS``).
-        planner: :class:`GraphMPCPlanner` settings of the learned-model controllers.
-        oracle_planner: Planner settings of the oracle (its model is cheap).
+        planner: :class:`GraphMPCPlanner` settings (the budget) of every planning method: the
+            learned-model controllers and the oracle plan with the same budget.
         oracle_contact_radius: Object-plus-pusher radius of the oracle's push model, metres.
         num_objects: Object counts of the generalization table (empty: skipped).
         geometries: Geometries of the generalization table.
         backgrounds: Extra backgrounds to test (e.g. ``["random"]``; empty: skipped).
         generalization_episodes: Episodes per generalization cell.
         workers: Parallel worker processes (<= 1 runs inline).
-        seed: Seed of the first episode.
+        split: ``"validation"`` (choosing) or ``"test"`` (reporting) episodes, see
+            :data:`SPLIT_SEEDS`.
         videos: Episodes of ``kinet_method`` recorded as GIFs.
         kinet_method: The KINet planner of the generalization conditions and the videos.
     """
@@ -106,20 +122,20 @@ class RearrangementSettings:
     episodes: int = 4
     methods: tuple[str, ...] = DEFAULT_METHODS
     planner: Mapping[str, Any] = field(default_factory=lambda: planner_budget(3, 64, 8))
-    oracle_planner: Mapping[str, Any] = field(default_factory=lambda: planner_budget(5, 256, 16))
     oracle_contact_radius: float = 0.035
     num_objects: tuple[int, ...] = ()
     geometries: tuple[str, ...] = ("train", "gen")
     backgrounds: tuple[str, ...] = ()
     generalization_episodes: int = 2
     workers: int = 2
-    seed: int = 10_000
+    split: Split = "test"
     videos: int = 1
     kinet_method: str = "kinet_graph_distance"
 
     def __post_init__(self) -> None:
         at_least(self, 1, "episodes", "generalization_episodes")
-        at_least(self, 0, "videos", "seed")
+        at_least(self, 0, "videos")
+        require(self.split in SPLIT_SEEDS, "split", self.split, f"one of {list(SPLIT_SEEDS)}")
         require(
             self.oracle_contact_radius > 0,
             "oracle_contact_radius",
@@ -133,9 +149,13 @@ class RearrangementSettings:
         ):
             values = getattr(self, name)
             require(all(v in choices for v in values), name, list(values), f"a list of {allowed}")
-        for name in ("planner", "oracle_planner"):
-            with config_group(name):
-                check_planner_settings(getattr(self, name))
+        with config_group("planner"):
+            check_planner_settings(self.planner)
+
+    @property
+    def first_seed(self) -> int:
+        """Seed of the split's first episode (episode ``i`` uses ``first_seed + i``)."""
+        return SPLIT_SEEDS[self.split]
 
     @classmethod
     def from_dicts(
@@ -161,7 +181,6 @@ class RearrangementSettings:
         """Plain-container form (for JSON)."""
         out = asdict(self)
         out["planner"] = dict(self.planner)
-        out["oracle_planner"] = dict(self.oracle_planner)
         return out
 
     def conditions(self, generalization: bool = True) -> list[Condition]:

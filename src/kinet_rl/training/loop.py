@@ -15,6 +15,7 @@ from torchrl.record.loggers import Logger
 from tqdm.auto import tqdm
 
 from kinet_rl.config_schema import at_least, require
+from kinet_rl.interrupts import deferred_interrupts
 from kinet_rl.training.checkpoint import TrainingCheckpoint
 from kinet_rl.training.distributed import DistContext, mean_across_processes, wrap_data_parallel
 
@@ -208,7 +209,13 @@ class Trainer:
             self.checkpoint.save(self.state_dict(), best=best)
 
     def fit(self) -> dict[str, float]:
-        """Trains until ``settings.steps``; returns the last validation scores."""
+        """Trains until ``settings.steps``; returns the last validation scores.
+
+        Ctrl-C or SIGTERM (in a single-process run) lets the current step, with its logging and
+        validation, finish, saves the checkpoint and raises
+        :class:`~kinet_rl.interrupts.Interrupted`; a second signal stops at once, keeping the
+        last periodic checkpoint. Rerunning resumes from the checkpoint.
+        """
         s = self.settings
         bar = tqdm(
             total=s.steps,
@@ -218,23 +225,29 @@ class Trainer:
             dynamic_ncols=True,
         )
         scores: dict[str, float] = {}
-        while self.step < s.steps:
-            losses = self.train_step()
-            bar.update(1)
-            if self.step % s.log_every == 0 or self.step == s.steps:
-                terms = {f"train/{k}": v.item() for k, v in losses.items()}
-                terms["train/loss"] = sum(terms.values())
-                self._log(terms)
-                bar.set_postfix(loss=f"{terms['train/loss']:.4f}")
-            if self.step % s.eval_every == 0 or self.step == s.steps:
-                scores = self.validate()
-                self._log(scores)
-                is_best = scores["val/loss"] < self.best_val
-                self.best_val = min(self.best_val, scores["val/loss"])
-                self._save(best=is_best)
-            elif self.step % s.checkpoint_every == 0:
-                self._save()
-        bar.close()
+        with bar, deferred_interrupts(enabled=self.ctx.world_size == 1) as stop:
+            while self.step < s.steps:
+                losses = self.train_step()
+                bar.update(1)
+                if self.step % s.log_every == 0 or self.step == s.steps:
+                    terms = {f"train/{k}": v.item() for k, v in losses.items()}
+                    terms["train/loss"] = sum(terms.values())
+                    self._log(terms)
+                    bar.set_postfix(loss=f"{terms['train/loss']:.4f}")
+                if self.step % s.eval_every == 0 or self.step == s.steps:
+                    scores = self.validate()
+                    self._log(scores)
+                    is_best = scores["val/loss"] < self.best_val
+                    self.best_val = min(self.best_val, scores["val/loss"])
+                    self._save(best=is_best)
+                elif self.step % s.checkpoint_every == 0:
+                    self._save()
+                if stop.requested:
+                    self._save()
+                    log.warning(
+                        "Stopped at step %d: saved %s", self.step, self.checkpoint.last_path
+                    )
+                    stop.raise_if_requested()
         if not scores:
             scores = self.validate()
         return scores

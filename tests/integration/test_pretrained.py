@@ -1,0 +1,62 @@
+"""The models shipped with the package load safely, match their cards, and plan (slow)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import torch
+from PIL import Image
+
+from kinet_rl import plan
+from kinet_rl.envs.settings import SceneSettings
+from kinet_rl.models import KINetWorldModel, model_card, pretrained_names
+from kinet_rl.models.pretrained import pretrained_path, resolve_checkpoint
+from kinet_rl.pipeline import pretrained_keypoint_accuracy
+from kinet_rl.rearrangement.episodes import make_episode
+from kinet_rl.rearrangement.settings import TaskSettings
+
+pytestmark = pytest.mark.slow
+
+CARD_FIELDS = {"name", "model", "command", "seed", "data", "training", "scene", "metrics", "check"}
+
+
+def test_blocks_model_is_shipped() -> None:
+    assert "blocks_topview" in pretrained_names()
+
+
+@pytest.mark.parametrize("name", pretrained_names())
+def test_shipped_model_loads_with_weights_only_and_reproduces_its_card(
+    name: str, tmp_path: Path
+) -> None:
+    torch.load(pretrained_path(name), weights_only=True)  # no pickled code in the file
+    card = model_card(name)
+    assert CARD_FIELDS <= set(card) and card["name"] == name
+    model = KINetWorldModel.from_pretrained(name)
+    assert not model.training
+    check = card["check"]
+    accuracy = pretrained_keypoint_accuracy(name, tmp_path)
+    assert accuracy == pytest.approx(check["keypoint_accuracy"], abs=check["tolerance"])
+
+
+def test_unknown_pretrained_name_lists_the_shipped_ones() -> None:
+    with pytest.raises(ValueError, match="shipped: .*blocks_topview"):
+        resolve_checkpoint("pretrained:no_such_model")
+    assert resolve_checkpoint("runs/x/kinet.pt") == Path("runs/x/kinet.pt")
+
+
+def test_plan_cli_plans_with_a_shipped_model(tmp_path: Path, capsys) -> None:
+    scene = SceneSettings.from_mapping(model_card("blocks_topview")["scene"])
+    episode = make_episode(scene, TaskSettings(), 50_000)
+    try:
+        Image.fromarray(episode.start["pixels"]).save(tmp_path / "now.png")
+        Image.fromarray(episode.goal_pixels).save(tmp_path / "goal.png")
+    finally:
+        episode.close()
+    args = ["--checkpoint", "pretrained:blocks_topview", "--image", str(tmp_path / "now.png")]
+    args += ["--goal", str(tmp_path / "goal.png"), "--candidates", "32", "--iterations", "2"]
+    (push,) = plan.main([*args, "--top-k", "4"])
+    assert json.loads(capsys.readouterr().out) == push
+    assert all(-1.0 <= v <= 1.0 for v in push["normalised"])
+    assert push["start_xy_m"] == pytest.approx([0.2 * v for v in push["normalised"][:2]])
