@@ -15,7 +15,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from kinet_rl.configs import config_dir
 from kinet_rl.interrupts import exit_on_interrupt
-from kinet_rl.pipeline import ExperimentSettings, collect_datasets
+from kinet_rl.pipeline import check_config, collect_datasets
 
 logger = logging.getLogger(__name__)
 
@@ -23,9 +23,9 @@ logger = logging.getLogger(__name__)
 @exit_on_interrupt("kinet_rl.collect")
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
 def main(cfg: DictConfig) -> None:
-    """Entry point: collect every dataset of the composed config."""
+    """Entry point: check the composed config, then collect every dataset of it."""
     container = cast(dict[str, Any], OmegaConf.to_container(cfg, resolve=True))
-    settings = ExperimentSettings.from_container(container)
+    settings = check_config(container)
     for path in collect_datasets(settings.env, settings.data):
         logger.info("Dataset ready: %s", path)
 

@@ -28,25 +28,23 @@ from kinet_rl.configs import config_dir
 from kinet_rl.interrupts import exit_on_interrupt
 from kinet_rl.models import KINetWorldModel
 from kinet_rl.models.pretrained import resolve_checkpoint
-from kinet_rl.pipeline import KINET_FILE, evaluate_rearrangement
+from kinet_rl.pipeline import KINET_FILE, check_config, evaluate_rearrangement
 from kinet_rl.rearrangement import RearrangementSettings
-from kinet_rl.rearrangement.methods import check_methods
 from kinet_rl.training.loggers import make_logger
 
 logger = logging.getLogger(__name__)
 
 
 def settings_from_config(cfg: DictConfig) -> RearrangementSettings:
-    """The evaluation settings of a composed config (needs the ``eval`` and ``env`` groups)."""
+    """The evaluation settings of a composed config (needs the ``eval`` and ``env`` groups),
+    after checking the whole config (:func:`kinet_rl.pipeline.check_config`)."""
     if cfg.get("eval") is None:
         raise ValueError(
             "The config has no 'eval' group; add `- eval: rearrange` to conf/config.yaml's "
             "defaults or pass +eval=rearrange."
         )
     container = cast(dict[str, Any], OmegaConf.to_container(cfg, resolve=True))
-    settings = RearrangementSettings.from_dicts(container["eval"], container["env"])
-    check_methods(settings)
-    return settings
+    return check_config(container).rearrangement
 
 
 def evaluate(cfg: DictConfig, run_dir: Path) -> dict[str, Any]:

@@ -20,8 +20,21 @@ from torch import nn
 from torchrl.record.loggers import Logger
 
 from kinet_rl.atomic import atomic_write_json, directory_lock
-from kinet_rl.data import collect_dataset, load_dataset
+from kinet_rl.config_schema import (
+    ConfigError,
+    check_arguments,
+    check_keys,
+    config_group,
+    conform,
+    parameter_annotation,
+    require,
+    settings_from,
+    target_arguments,
+)
+from kinet_rl.data import collect_dataset, load_dataset, split_ranges
+from kinet_rl.data.collection import DEFAULT_SPLITS, check_collection
 from kinet_rl.envs import make_env
+from kinet_rl.envs.factory import check_env_arguments
 from kinet_rl.envs.geometry import SceneGeometry
 from kinet_rl.envs.settings import SceneSettings
 from kinet_rl.evaluation.forward import keypoint_accuracy
@@ -34,7 +47,7 @@ from kinet_rl.rearrangement.runner import run_rearrangement
 from kinet_rl.rearrangement.settings import RearrangementSettings
 from kinet_rl.training.checkpoint import TrainingCheckpoint
 from kinet_rl.training.distributed import DistContext, init_distributed
-from kinet_rl.training.loggers import MEDIA_SUFFIXES, log_media, make_logger
+from kinet_rl.training.loggers import LOGGER_KINDS, MEDIA_SUFFIXES, log_media, make_logger
 from kinet_rl.training.loop import Trainer, TrainerSettings
 
 log = logging.getLogger(__name__)
@@ -43,6 +56,28 @@ log = logging.getLogger(__name__)
 DATASET_ENV_KEYS = ("task", "camera", "image_size", "num_objects")
 #: File name of a trained model in its run directory.
 KINET_FILE, BASELINE_FILE = "kinet.pt", "model.pt"
+#: Top-level keys of the root config (``conf/config.yaml``); ``checkpoint`` is read by
+#: ``kinet_rl.evaluate``.
+ROOT_KEYS = (
+    "exp_name",
+    "seed",
+    "device",
+    "checkpoint",
+    "env",
+    "data",
+    "model",
+    "loss",
+    "trainer",
+    "report",
+    "logger",
+    "eval",
+)
+#: The loss constructor's argument that gets the model (the entry points pass it, not the config).
+LOSS_MODEL_ARGUMENT = "world_model"
+#: Keys of a ``data.generalization`` entry.
+GENERALIZATION_KEYS = ("num_episodes", "env", "seed")
+#: Splits that training and its report read.
+TRAINING_SPLITS = ("train", "val", "test")
 #: Folder of an evaluation's finished episodes (an interrupted evaluation resumes from them).
 EPISODES_DIR = "episodes"
 
@@ -81,6 +116,15 @@ class ExperimentSettings:
     loss_config: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        require(self.logger in LOGGER_KINDS, "logger.kind", self.logger, f"one of {LOGGER_KINDS}")
+        require(
+            self.device == "auto" or _is_device(self.device),
+            "device",
+            self.device,
+            "auto or a torch device (cpu, cuda, cuda:1)",
+        )
+        self._check_episode_length()
+        self._check_splits()
         loss = self.loss_config
         if (
             loss.get("ctr_negatives") == "episode"
@@ -101,25 +145,76 @@ class ExperimentSettings:
                 "loss.rollout_weight=0."
             )
 
+    def _check_episode_length(self) -> None:
+        """Training windows and report horizons must fit in an episode (``env.max_steps``)."""
+        length = self.env.get("max_steps")
+        if length is None:
+            return
+        trainer, horizons = self.trainer, self.report.horizons
+        fits = f"at most env.max_steps={length} (the pushes per episode)"
+        require(trainer.horizon <= length, "trainer.horizon", trainer.horizon, fits)
+        require(max(horizons) <= length, "report.horizons", list(horizons), f"values {fits}")
+        windows = length - trainer.horizon + 1
+        require(
+            trainer.steps_per_episode <= windows,
+            "trainer.steps_per_episode",
+            trainer.steps_per_episode,
+            f"at most env.max_steps - trainer.horizon + 1 = {windows}",
+        )
+
+    def _check_splits(self) -> None:
+        """Each split that training reads gets at least one episode of the main dataset."""
+        splits = self.data.get("splits") or DEFAULT_SPLITS
+        with config_group("data"):
+            ranges = split_ranges(self.data["num_episodes"], splits)
+        sizes = {name: stop - start for name, (start, stop) in ranges.items()}
+        empty = [name for name in TRAINING_SPLITS if sizes.get(name, 0) < 1]
+        require(
+            not empty,
+            "data.splits",
+            dict(splits),
+            f"fractions that give {', '.join(TRAINING_SPLITS)} at least one of the "
+            f"data.num_episodes={self.data['num_episodes']} episodes each (empty: {empty})",
+        )
+
     @classmethod
     def from_container(cls, cfg: Mapping[str, Any]) -> ExperimentSettings:
-        """Settings from a resolved plain-container config (``conf/config.yaml``'s layout)."""
+        """Settings from a resolved plain-container config (``conf/config.yaml``'s layout).
+
+        Checks the keys, types and ranges of every group (``env``, ``data``, ``trainer``,
+        ``report``, ``eval``, ``logger``; ``model`` and ``loss`` against their ``_target_``'s
+        parameters, whose ranges :func:`check_config` checks by building them).
+
+        Raises:
+            ConfigError: An unknown key, a wrong type or an out-of-range value, named.
+        """
+        check_keys(cfg, ROOT_KEYS)
+        conform("checkpoint", cfg.get("checkpoint"), str | None)  # read by kinet_rl.evaluate
+        with config_group("env"):
+            check_env_arguments(cfg["env"])
         env = {k: v for k, v in cfg["env"].items() if k != "_target_"}
-        report = dict(cfg["report"])
-        report["horizons"] = tuple(report.get("horizons", ReportSettings.horizons))
+        logger = dict(cfg["logger"])
+        check_keys(logger, ("kind", "wandb_kwargs"), "logger")
+        with config_group("eval"):
+            rearrangement = RearrangementSettings.from_dicts(cfg.get("eval") or {}, env)
+        model_config, loss_config = dict(cfg["model"]), dict(cfg["loss"])
+        target_arguments(model_config, "model")
+        target_arguments(loss_config, "loss", exclude=[LOSS_MODEL_ARGUMENT])
         return cls(
-            name=cfg["exp_name"],
-            seed=int(cfg["seed"]),
-            device=cfg["device"],
+            name=conform("exp_name", cfg["exp_name"], str),
+            seed=conform("seed", cfg["seed"], int),
+            device=conform("device", cfg["device"], str),
             env=env,
-            data=dict(cfg["data"]),
-            trainer=TrainerSettings(**cfg["trainer"]),
-            report=ReportSettings(**report),
-            rearrangement=RearrangementSettings.from_dicts(cfg.get("eval") or {}, env),
-            logger=cfg["logger"]["kind"],
-            wandb_kwargs=dict(cfg["logger"].get("wandb_kwargs") or {}),
-            model_config=dict(cfg["model"]),
-            loss_config=dict(cfg["loss"]),
+            data=check_data(cfg["data"], env),
+            trainer=settings_from(TrainerSettings, cfg["trainer"], "trainer"),
+            report=settings_from(ReportSettings, cfg["report"], "report"),
+            rearrangement=rearrangement,
+            logger=conform("logger.kind", logger["kind"], str),
+            wandb_kwargs=conform(
+                "logger.wandb_kwargs", logger.get("wandb_kwargs") or {}, Mapping[str, Any]
+            ),
+            model_config=model_config,
+            loss_config=loss_config,
         )
 
     @property
@@ -140,6 +235,87 @@ class ExperimentSettings:
             "dataset": str(self.dataset_path),
             "batch_size": self.trainer.batch_size,
         }
+
+
+def _is_device(name: str) -> bool:
+    try:
+        torch.device(name)
+    except RuntimeError:
+        return False
+    return True
+
+
+def check_data(data: Mapping[str, Any], env: Mapping[str, Any]) -> dict[str, Any]:
+    """The ``data`` group, checked: :func:`collect_dataset` arguments plus ``generalization``.
+
+    Each generalization set may set ``num_episodes``, ``seed`` and ``env`` overrides, which must
+    give a valid scene together with ``env``.
+
+    Raises:
+        ConfigError: An unknown key, a wrong type or an out-of-range value, named.
+    """
+    main = {k: v for k, v in data.items() if k != "generalization"}
+    args = check_arguments(collect_dataset, main, "data", exclude=("env_fn", "env_config"))
+    with config_group("data"):
+        check_collection(
+            args["num_episodes"],
+            args["num_workers"],
+            args["chunk_episodes"],
+            DEFAULT_SPLITS if args["splits"] is None else args["splits"],
+            args["policy"] or {},
+            args["max_discard_fraction"],
+            args["backend"],
+            args["distributed"],
+        )
+    sets = conform(
+        "data.generalization", data.get("generalization"), Mapping[str, Mapping[str, Any]] | None
+    )
+    for name, extra in (sets or {}).items():
+        group = f"data.generalization.{name}"
+        check_keys(extra, GENERALIZATION_KEYS, group)
+        size = extra.get("num_episodes", args["num_episodes"])  # the main set's by default
+        num_episodes = conform(f"{group}.num_episodes", size, int)
+        require(
+            num_episodes >= 1, f"{group}.num_episodes", num_episodes, "an integer of at least 1"
+        )
+        conform(f"{group}.seed", extra.get("seed"), int | None)
+        overrides = conform(f"{group}.env", extra.get("env") or {}, Mapping[str, Any])
+        with config_group(f"{group}.env"):
+            check_env_arguments({**env, **overrides})
+    return dict(data)
+
+
+def check_config(cfg: Mapping[str, Any]) -> ExperimentSettings:
+    """Checks a whole resolved root config before any work; returns its settings.
+
+    Builds the typed settings of every group (:meth:`ExperimentSettings.from_container`), checks
+    the rearrangement methods, then builds the model and its loss once on the CPU (and drops
+    them) so that their constructors' own checks run too. Entry points call it first: a typo
+    fails in seconds, not after an hour of collection.
+
+    Raises:
+        ConfigError: The first invalid entry, named with its value and what is allowed.
+    """
+    settings = ExperimentSettings.from_container(cfg)
+    with config_group("eval"):
+        check_methods(settings.rearrangement)
+    model_class, model_args = target_arguments(settings.model_config, "model")
+    loss_class, loss_args = target_arguments(
+        settings.loss_config, "loss", exclude=[LOSS_MODEL_ARGUMENT]
+    )
+    with config_group("model"):
+        model = model_class(**model_args)
+    trains = parameter_annotation(loss_class, LOSS_MODEL_ARGUMENT)
+    if isinstance(trains, type) and not isinstance(model, trains):
+        raise ConfigError(
+            "loss",
+            f"{loss_class.__name__} trains a {trains.__name__}, but the model group builds a "
+            f"{type(model).__name__}; choose the loss group of the model (e.g. model=forw "
+            "loss=forw).",
+        )
+    with config_group("loss"):
+        loss_class(**{LOSS_MODEL_ARGUMENT: model}, **loss_args)
+    return settings
 
 
 def dataset_path(data: Mapping[str, Any]) -> Path:

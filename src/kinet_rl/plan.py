@@ -22,12 +22,23 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+from kinet_rl.config_schema import ConfigError, require
+from kinet_rl.envs.settings import check_image_size
 from kinet_rl.envs.workspace import WORKSPACES
 from kinet_rl.models import REWARDS, KINetWorldModel, PushPlanner
 from kinet_rl.models.checkpointing import checkpoint_scene
 from kinet_rl.models.pretrained import resolve_checkpoint
+from kinet_rl.planners.graph_mpc import check_planner_settings
 
 logger = logging.getLogger(__name__)
+
+#: The planner settings of :class:`PushPlanner` and the argument (``--<name>``) that sets each.
+PLANNER_ARGUMENTS = {
+    "planning_horizon": "horizon",
+    "num_candidates": "candidates",
+    "optim_steps": "iterations",
+    "top_k": "top_k",
+}
 
 
 def read_image(path: Path, size: int | None = None) -> np.ndarray:
@@ -40,8 +51,25 @@ def read_image(path: Path, size: int | None = None) -> np.ndarray:
     return np.asarray(image)
 
 
+def planner_settings(args: argparse.Namespace) -> dict[str, int]:
+    """The :class:`~kinet_rl.planners.GraphMPCPlanner` settings of the command line."""
+    return {name: getattr(args, dest) for name, dest in PLANNER_ARGUMENTS.items()}
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """Raises ``ConfigError`` (its key the argument's name) for arguments the planner refuses."""
+    try:
+        check_planner_settings(planner_settings(args))
+    except ConfigError as err:
+        raise ConfigError(PLANNER_ARGUMENTS.get(err.key, err.key), err.problem) from None
+    if args.image_size is not None:
+        check_image_size(args.image_size)
+    half_size = args.workspace_half_size
+    require(half_size is None or half_size > 0, "workspace_half_size", half_size, "metres > 0")
+
+
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
-    """Command-line arguments."""
+    """Command-line arguments, checked before any model is loaded."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "--checkpoint",
@@ -74,7 +102,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--iterations", type=int, default=5)
     parser.add_argument("--top-k", type=int, default=32)
     parser.add_argument("--seed", type=int, default=0)
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    try:
+        check_args(args)
+    except ConfigError as err:
+        parser.error(f"argument --{err.key.replace('_', '-')}: {err.problem}")
+    return args
 
 
 def main(argv: Sequence[str] | None = None) -> list[dict]:
@@ -91,10 +124,7 @@ def main(argv: Sequence[str] | None = None) -> list[dict]:
         half_size,
         reward=REWARDS[args.reward](),
         seed=args.seed,
-        planning_horizon=args.horizon,
-        num_candidates=args.candidates,
-        optim_steps=args.iterations,
-        top_k=args.top_k,
+        **planner_settings(args),
     )
     goal = read_image(args.goal, size)
     pushes = []

@@ -23,8 +23,10 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import time
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, cast
 
@@ -44,6 +46,14 @@ from kinet_rl.comparison import (
     table_i,
     table_ii,
 )
+from kinet_rl.config_schema import (
+    ConfigError,
+    check_arguments,
+    check_keys,
+    config_group,
+    require,
+    settings_from,
+)
 from kinet_rl.configs import config_dir
 from kinet_rl.data import load_dataset
 from kinet_rl.envs.geometry import SceneGeometry
@@ -56,9 +66,11 @@ from kinet_rl.pipeline import (
     DATASET_ENV_KEYS,
     KINET_FILE,
     ExperimentSettings,
+    check_config,
     evaluate_rearrangement,
     run_experiment,
 )
+from kinet_rl.planners.graph_mpc import CODE_ARGUMENTS, GraphMPCPlanner, check_planner_settings
 from kinet_rl.rearrangement import RearrangementSettings
 from kinet_rl.rearrangement.report import budget_text
 
@@ -75,6 +87,77 @@ EXPERIMENT_SUFFIX = {
     "visin": "_visin",
 }
 CAMERAS = ("top", "side")
+#: What a planner budget's name may be (it is part of file names, e.g. ``tables_mpc_64x3.json``).
+BUDGET_NAME = re.compile(r"[\w.-]+")
+
+
+@dataclass(frozen=True)
+class TablesSettings:
+    """The ``tables`` config group (``conf/tables/<scale>.yaml``; each file documents its keys).
+
+    ``mpc_budgets`` maps a budget's name to planner settings that override each row's eval
+    planner; their keys and types are checked here, their ranges by :func:`check_rows`.
+
+    Raises:
+        ConfigError: A model, camera, seed or budget that no row can have, named.
+    """
+
+    scale: str
+    models: tuple[str, ...]
+    cameras: tuple[str, ...]
+    mpc_camera: str
+    generalization_models: tuple[str, ...]
+    seeds: tuple[int, ...]
+    forward_horizons: tuple[int, ...]
+    forward_sequences: int
+    mpc_budgets: Mapping[str, Mapping[str, Any]]
+    overrides: tuple[str, ...] = ()
+    model_overrides: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    eval: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name, choices, least in (
+            ("models", tuple(EXPERIMENT_SUFFIX), 1),
+            ("cameras", CAMERAS, 1),
+            ("generalization_models", self.models, 0),
+            ("model_overrides", tuple(EXPERIMENT_SUFFIX), 0),
+        ):
+            values = list(getattr(self, name))
+            require(
+                len(values) >= least and set(values) <= set(choices),
+                name,
+                values,
+                f"{'a non-empty list' if least else 'a list'} of names from {list(choices)}",
+            )
+        require(self.mpc_camera in self.cameras, "mpc_camera", self.mpc_camera, "one of cameras")
+        for name, low in (("seeds", 0), ("forward_horizons", 1)):
+            values = list(getattr(self, name))
+            require(
+                bool(values) and min(values) >= low,
+                name,
+                values,
+                f"a non-empty list of integers of at least {low}",
+            )
+        require(
+            self.forward_sequences >= 1,
+            "forward_sequences",
+            self.forward_sequences,
+            "an integer of at least 1",
+        )
+        require(
+            bool(self.mpc_budgets) and all(BUDGET_NAME.fullmatch(n) for n in self.mpc_budgets),
+            "mpc_budgets",
+            dict(self.mpc_budgets),
+            "a non-empty mapping from names (letters, digits, '_', '-', '.'; they name files) to "
+            "planner settings, e.g. {64x3: {num_candidates: 64, optim_steps: 3, top_k: 8}}",
+        )
+        for name, budget in self.mpc_budgets.items():  # keys and types; ranges: check_rows
+            check_arguments(GraphMPCPlanner, budget, f"mpc_budgets.{name}", exclude=CODE_ARGUMENTS)
+
+    @classmethod
+    def from_container(cls, values: Mapping[str, Any]) -> TablesSettings:
+        """Settings from the resolved ``tables`` group."""
+        return settings_from(cls, values, "tables")
 
 
 def experiment_name(model: str, camera: str) -> str:
@@ -87,7 +170,7 @@ def experiment_name(model: str, camera: str) -> str:
     return f"blocks_{camera}view{EXPERIMENT_SUFFIX[model]}"
 
 
-def row_config(tables: DictConfig, model: str, camera: str, seed: int = 0) -> DictConfig:
+def row_config(tables: TablesSettings, model: str, camera: str, seed: int = 0) -> DictConfig:
     """The composed training config of a row and training seed (needs an initialised Hydra)."""
     exp = experiment_name(model, camera)
     extra = [o.replace("{camera}", camera) for o in tables.overrides]
@@ -99,6 +182,32 @@ def row_config(tables: DictConfig, model: str, camera: str, seed: int = 0) -> Di
             f"Experiment {exp} sets exp_name={cfg.exp_name}; the tables need them equal."
         )
     return cfg
+
+
+def check_rows(tables: TablesSettings) -> None:
+    """Composes and checks the config of every row (:func:`~kinet_rl.pipeline.check_config`,
+    its evaluation with the scale's ``eval`` overrides, and its planner under each of
+    ``mpc_budgets``) before any row trains.
+
+    Raises:
+        ConfigError: The first invalid entry, naming the row it was found in.
+    """
+    for model in tables.models:
+        for camera in tables.cameras:
+            cfg = row_config(tables, model, camera, tables.seeds[0])
+            try:
+                check_config(to_dict(cfg))
+                with config_group("tables.eval"):  # the row's eval group, with these overrides
+                    planner = rearrangement_settings(cfg, tables.eval).planner
+                for name, budget in tables.mpc_budgets.items():
+                    with config_group(f"tables.mpc_budgets.{name}"):
+                        check_planner_settings({**planner, **budget})
+            except ConfigError as err:
+                raise ConfigError(
+                    err.key,
+                    f"{err.problem} (in row {cfg.exp_name}: +exp={cfg.exp_name} with the "
+                    f"overrides and eval entries of conf/tables/{tables.scale}.yaml)",
+                ) from None
 
 
 def load_model(cfg: DictConfig, run_dir: Path) -> Any:
@@ -139,7 +248,7 @@ def rearrangement_settings(
     eval_overrides: Mapping[str, Any],
     methods: list[str] | None = None,
     budget: str | None = None,
-    tables: DictConfig | None = None,
+    tables: TablesSettings | None = None,
 ) -> RearrangementSettings:
     """The row's eval group with the table scale's overrides, and if given these methods and the
     planner budget ``tables.mpc_budgets[budget]`` (merged onto the eval group's planner)."""
@@ -148,7 +257,7 @@ def rearrangement_settings(
     if methods is not None:
         eval_cfg["methods"] = methods
     if budget is not None and tables is not None:
-        eval_cfg["planner"] = {**eval_cfg["planner"], **to_dict(tables.mpc_budgets[budget])}
+        eval_cfg["planner"] = {**eval_cfg["planner"], **tables.mpc_budgets[budget]}
     return RearrangementSettings.from_dicts(eval_cfg, container["env"])
 
 
@@ -158,7 +267,7 @@ def run_dir_of(out_dir: Path, exp_name: str, seed: int) -> Path:
 
 
 def run_row(
-    tables: DictConfig, model: str, camera: str, out_dir: Path, seed: int = 0
+    tables: TablesSettings, model: str, camera: str, out_dir: Path, seed: int = 0
 ) -> dict[str, Any]:
     """Trains (unless finished) and evaluates one row and seed; returns its table entries.
 
@@ -178,7 +287,7 @@ def run_row(
         )
         logger.info("Trained %s in %.0f s", cfg.exp_name, time.monotonic() - start)
     net = load_model(cfg, run_dir)
-    eval_overrides = to_dict(tables.eval)
+    eval_overrides = tables.eval
 
     def forward() -> dict[str, Any]:
         settings = ExperimentSettings.from_container(to_dict(cfg))
@@ -205,12 +314,16 @@ def run_row(
             generalization = i == 0 and model in tables.generalization_models
             settings = rearrangement_settings(cfg, eval_overrides, [method], budget, tables)
 
-            def mpc(settings=settings, generalization=generalization) -> dict[str, Any]:
+            def mpc(
+                settings=settings, generalization=generalization, budget=budget
+            ) -> dict[str, Any]:
                 start = time.monotonic()
                 summary = evaluate_rearrangement(
                     net, settings, run_dir / f"tables_mpc_{budget}", generalization, progress=True
                 )["summary"]
-                logger.info("MPC of %s at %s took %.0f s", cfg.exp_name, budget, time.monotonic() - start)
+                logger.info(
+                    "MPC of %s at %s took %.0f s", cfg.exp_name, budget, time.monotonic() - start
+                )
                 return {cond: by_method[method] for cond, by_method in summary.items()}
 
             key = {"rearrangement": settings.as_dict(), "generalization": generalization}
@@ -219,12 +332,11 @@ def run_row(
 
 
 def references(
-    tables: DictConfig, out_dir: Path, budget: str
+    tables: TablesSettings, out_dir: Path, budget: str
 ) -> tuple[dict[str, Any], RearrangementSettings]:
     """Random pushes and the oracle on the MPC table's episodes at ``budget``, and the settings."""
     cfg = row_config(tables, tables.models[0], tables.mpc_camera)
-    eval_overrides = to_dict(tables.eval)
-    settings = rearrangement_settings(cfg, eval_overrides, ["random", "oracle"], budget, tables)
+    settings = rearrangement_settings(cfg, tables.eval, ["random", "oracle"], budget, tables)
 
     def compute() -> dict[str, Any]:
         summary = evaluate_rearrangement(
@@ -236,9 +348,21 @@ def references(
     return stats, settings
 
 
-def build_tables(tables: DictConfig, out_dir: Path) -> Path:
-    """Runs every row (resuming), then writes ``tables.md`` and one ``mpc_curves_<budget>.png``
-    per planner budget; returns the markdown path."""
+def build_tables(tables: TablesSettings, out_dir: Path) -> Path:
+    """Checks every row's config, then (holding ``out_dir``'s lock) runs every row (resuming) and
+    writes ``tables.md`` and one ``mpc_curves_<budget>.png`` per planner budget; returns the
+    markdown path (needs an initialised Hydra).
+
+    Raises:
+        ConfigError: A row's config is invalid (nothing is written).
+        DirectoryInUseError: Another process is building tables in ``out_dir``.
+    """
+    check_rows(tables)
+    with directory_lock(out_dir, "building the comparison tables"):
+        return _build_tables(tables, out_dir)
+
+
+def _build_tables(tables: TablesSettings, out_dir: Path) -> Path:
     forward: dict[str, dict[str, list[Any]]] = {}
     run_dirs: dict[str, dict[str, list[Path]]] = {}
     budgets = list(tables.mpc_budgets)
@@ -348,8 +472,9 @@ def build_tables(tables: DictConfig, out_dir: Path) -> Path:
 def main(cfg: DictConfig) -> None:
     """Entry point."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
-    with directory_lock(out_dir, "building the comparison tables"):
-        path = build_tables(cfg.tables, out_dir)
+    container = to_dict(cfg)
+    check_keys(container, ["tables"])
+    path = build_tables(TablesSettings.from_container(container["tables"]), out_dir)
     print(path.read_text())
 
 

@@ -19,14 +19,15 @@ from omegaconf import DictConfig, OmegaConf
 
 from kinet_rl.configs import config_dir
 from kinet_rl.interrupts import exit_on_interrupt
-from kinet_rl.pipeline import ExperimentSettings, run_experiment
+from kinet_rl.pipeline import check_config, run_experiment
 
 
 def run(cfg: DictConfig, run_dir: Path) -> dict[str, Any]:
-    """Runs the experiment of a composed config in ``run_dir``; returns its results."""
+    """Checks a composed config (before any work), then runs its experiment in ``run_dir``;
+    returns its results."""
     container = cast(dict[str, Any], OmegaConf.to_container(cfg, resolve=True))
     return run_experiment(
-        ExperimentSettings.from_container(container),
+        check_config(container),
         lambda: instantiate(cfg.model, _convert_="all"),
         lambda model: instantiate(cfg.loss, world_model=model, _convert_="all"),
         run_dir,

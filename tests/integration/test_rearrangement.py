@@ -98,9 +98,9 @@ def test_evaluate_rearrangement_writes_plot_markdown_json_and_video_and_resumes(
     episodes = sum(stats["episodes"] for cell in summary.values() for stats in cell.values())
     assert len(list((tmp_path / "episodes").rglob("*.npz"))) == episodes
     monkeypatch.setattr(runner, "run_job", None)  # no episode may run again
-    (tmp_path / f"rearrangement_seed{settings.seed}.gif").unlink()
+    (tmp_path / f"rearrangement_seed{settings.first_seed}.gif").unlink()
     assert evaluate_rearrangement(tiny_kinet(), settings, tmp_path, True)["summary"] == summary
-    assert (iio.imread(tmp_path / f"rearrangement_seed{settings.seed}.gif") == video).all()
+    assert (iio.imread(tmp_path / f"rearrangement_seed{settings.first_seed}.gif") == video).all()
 
 
 def test_plan_cli_prints_pushes_in_metres(tmp_path: Path, capsys, tiny_kinet) -> None:

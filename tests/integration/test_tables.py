@@ -14,7 +14,7 @@ from omegaconf import OmegaConf
 from kinet_rl.envs import SceneSettings
 from kinet_rl.pipeline import evaluate_rearrangement
 from kinet_rl.rearrangement.settings import RearrangementSettings, TaskSettings
-from kinet_rl.tables import build_tables
+from kinet_rl.tables import TablesSettings, build_tables
 
 pytestmark = pytest.mark.slow
 
@@ -78,6 +78,7 @@ def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, con
         tables.model_overrides = {
             m: SMALL_KINET if m.startswith("kinet") else SMALL for m in models
         }
+        tables = TablesSettings.from_container(OmegaConf.to_container(tables, resolve=True))
         path = build_tables(tables, tmp_path)
         text = path.read_text()
         # Resumable: a second call reuses every stage's JSON (no retraining).

@@ -17,7 +17,7 @@ SRC = Path(kinet_rl.__file__).resolve().parent
 ENTRY_POINTS = {"train", "collect", "evaluate", "tables", "plan"}
 #: Layers from the bottom up; a module may import only from its own layer or layers below.
 LAYERS = [
-    {"keys", "atomic", "devices", "configs", "interrupts", "stats"},
+    {"keys", "atomic", "devices", "configs", "config_schema", "interrupts", "stats"},
     {"envs"},
     {"data", "planners", "training"},
     {"models"},

@@ -120,9 +120,11 @@ def test_runaway_instability_aborts(tmp_path: Path) -> None:
 
 
 def test_unknown_backend_and_distributed_options_are_refused(tmp_path: Path) -> None:
-    with pytest.raises(ValueError, match="data.backend must be one of"):
+    with pytest.raises(
+        ValueError, match=r"backend: got 'ray', expected one of \('local', 'distributed'\)"
+    ):
         collect(tmp_path, "bad", backend="ray")
-    with pytest.raises(ValueError, match=r"data.distributed has \['frames_per_batch'\]"):
+    with pytest.raises(ValueError, match="distributed.frames_per_batch: unknown key"):
         collect(tmp_path, "bad", backend="distributed", distributed={"frames_per_batch": 3})
     assert not (tmp_path / "bad").exists()
 

@@ -68,7 +68,7 @@ def test_bad_policy_settings_are_refused() -> None:
         RandomPushPolicy(HALF, object_push_prob=1.5)
     with pytest.raises(ValueError, match="workspace_half_size"):
         RandomPushPolicy(0.0)
-    with pytest.raises(ValueError, match=r"push_length must be \[min, max\]"):
+    with pytest.raises(ValueError, match=r"push_length: got \[0.6, 0.3\], expected \[min, max\]"):
         RandomPushPolicy(HALF, push_length=(0.6, 0.3))
     with pytest.raises(ValueError, match="approach_distance"):
         RandomPushPolicy(HALF, approach_distance=(0.1,))

@@ -46,7 +46,9 @@ def test_default_settings_match_the_config_files():
 
 
 def test_an_unknown_eval_key_is_refused_with_the_allowed_ones():
-    with pytest.raises(ValueError, match="Unknown rearrangement settings \\['epsiodes'\\]"):
+    with pytest.raises(
+        ValueError, match=r"eval.epsiodes: unknown key \(set to 3\) \(did you mean episodes\?\)"
+    ):
         settings_of("+eval.epsiodes=3")
 
 

@@ -51,14 +51,14 @@ def test_validation_and_test_episodes_have_disjoint_seeds(yaml_settings) -> None
     validation, test = yaml_settings(split="validation"), yaml_settings(split="test")
     seeds = [range(s.first_seed, s.first_seed + 1000) for s in (validation, test)]
     assert not set(seeds[0]) & set(seeds[1])
-    with pytest.raises(ValueError, match="eval.split='train'; choose one of"):
+    with pytest.raises(ValueError, match="split: got 'train', expected one of 'validation'"):
         yaml_settings(split="train")
 
 
 def test_unknown_settings_are_reported(yaml_settings) -> None:
-    with pytest.raises(ValueError, match="Unknown rearrangement settings"):
+    with pytest.raises(ValueError, match="episodez: unknown key"):
         yaml_settings(episodez=3)
-    with pytest.raises(ValueError, match="at least 1"):
+    with pytest.raises(ValueError, match="episodes: got 0, expected an integer of at least 1"):
         yaml_settings(episodes=0)
 
 

@@ -21,6 +21,7 @@ from torchrl.weight_update import NoWeightSyncScheme
 from tqdm import tqdm
 
 from kinet_rl.atomic import directory_lock
+from kinet_rl.config_schema import check_arguments, check_keys, config_group, invalid, require
 from kinet_rl.data.policy import (
     EPISODE_ID,
     STEP_COUNT,
@@ -74,8 +75,8 @@ def episode_length_of(env: EnvBase) -> int:
 
 def split_ranges(num_episodes: int, splits: Mapping[str, float]) -> dict[str, list[int]]:
     """Assigns contiguous episode ranges [start, stop) to splits by cumulative fraction."""
-    if abs(sum(splits.values()) - 1.0) > 1e-6 or min(splits.values()) < 0:
-        raise ValueError(f"Split fractions must be >= 0 and sum to 1, got {dict(splits)}.")
+    if not splits or abs(sum(splits.values()) - 1.0) > 1e-6 or min(splits.values()) < 0:
+        raise invalid("splits", dict(splits), "fractions of at least 0 that sum to 1")
     ranges, start, cumulative = {}, 0, 0.0
     for name, fraction in splits.items():
         cumulative += fraction
@@ -153,16 +154,41 @@ class EpisodeAssembler:
 
 
 def check_backend(backend: str, distributed: Mapping[str, Any] | None) -> None:
-    """Raises ``ValueError`` for an unknown backend or unsettable ``DistributedCollector`` options."""
-    if backend not in BACKENDS:
-        raise ValueError(f"data.backend must be one of {BACKENDS}, got {backend!r}.")
+    """Raises ``ConfigError`` for an unknown backend or unsettable ``DistributedCollector`` options."""
+    require(backend in BACKENDS, "backend", backend, f"one of {BACKENDS}")
     accepted = set(inspect.signature(DistributedCollector).parameters) - set(DISTRIBUTED_FIXED_ARGS)
-    unknown = sorted(set(distributed or {}) - accepted)
-    if unknown:
-        raise ValueError(
-            f"data.distributed has {unknown}, which are not DistributedCollector arguments kinet_rl "
-            f"lets you set; use some of {sorted(accepted)} (e.g. launcher, tcp_port, backend)."
-        )
+    check_keys(distributed or {}, accepted, "distributed")  # those kinet_rl lets you set
+
+
+def check_collection(
+    num_episodes: int,
+    num_workers: int,
+    chunk_episodes: int,
+    splits: Mapping[str, float],
+    policy: Mapping[str, Any],
+    max_discard_fraction: float,
+    backend: str,
+    distributed: Mapping[str, Any] | None,
+) -> None:
+    """Raises (``ConfigError`` naming the argument) for :func:`collect_dataset` arguments it
+    would refuse; builds nothing, so a config can be checked before any collection."""
+    for name, value in (
+        ("num_episodes", num_episodes),
+        ("num_workers", num_workers),
+        ("chunk_episodes", chunk_episodes),
+    ):
+        require(value >= 1, name, value, "an integer of at least 1")
+    require(
+        0.0 <= max_discard_fraction <= 1.0,
+        "max_discard_fraction",
+        max_discard_fraction,
+        "a number in [0, 1]",
+    )
+    split_ranges(num_episodes, splits)
+    with config_group("policy"):
+        args = check_arguments(RandomPushPolicy, policy, exclude=["workspace_half_size"])
+        RandomPushPolicy(1.0, **args)  # its own range checks
+    check_backend(backend, distributed)
 
 
 def make_collector(
@@ -270,13 +296,20 @@ def collect_dataset(
     if (path / METADATA_FILE).exists():
         logger.info("Dataset %s is already complete; nothing to collect.", path)
         return path
-    if num_episodes < 1 or num_workers < 1 or chunk_episodes < 1:
-        raise ValueError("num_episodes, num_workers and chunk_episodes must all be >= 1.")
-    check_backend(backend, distributed)
+    splits = dict(DEFAULT_SPLITS if splits is None else splits)
+    check_collection(
+        num_episodes,
+        num_workers,
+        chunk_episodes,
+        splits,
+        policy or {},
+        max_discard_fraction,
+        backend,
+        distributed,
+    )
     with directory_lock(path, "collecting a dataset"):
         if (path / METADATA_FILE).exists():  # completed by the process that held the lock
             return path
-        splits = dict(DEFAULT_SPLITS if splits is None else splits)
         ranges = split_ranges(num_episodes, splits)
         probe = env_fn()
         try:

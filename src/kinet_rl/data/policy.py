@@ -17,6 +17,7 @@ from tensordict.nn import TensorDictModuleBase
 from torchrl.data import Composite, Unbounded
 from torchrl.envs import EnvBase, Transform
 
+from kinet_rl.config_schema import invalid, require
 from kinet_rl.keys import ACTION, OBJECT_POS
 
 EPISODE_ID = "episode_id"  # int64 [*B, 1] index of the episode within its collection run
@@ -32,7 +33,7 @@ def episode_seed(seed: int, episode: int) -> int:
 def _min_max(name: str, values: Sequence[float]) -> tuple[float, float]:
     bounds = [float(v) for v in values]
     if len(bounds) != 2 or bounds[0] > bounds[1]:
-        raise ValueError(f"data.policy.{name} must be [min, max] with min <= max, got {values}.")
+        raise invalid(name, list(values), "[min, max] with min <= max")
     return bounds[0], bounds[1]
 
 
@@ -72,17 +73,19 @@ class RandomPushPolicy(TensorDictModuleBase):
         keep_inside: float = 0.8,
     ) -> None:
         super().__init__()
-        if not workspace_half_size > 0:
-            raise ValueError(f"workspace_half_size must be > 0 metres, got {workspace_half_size}.")
-        if not 0.0 <= object_push_prob <= 1.0:
-            raise ValueError(f"object_push_prob must lie in [0, 1], got {object_push_prob}.")
+        require(workspace_half_size > 0, "workspace_half_size", workspace_half_size, "> 0 metres")
+        require(
+            0.0 <= object_push_prob <= 1.0,
+            "object_push_prob",
+            object_push_prob,
+            "a number in [0, 1]",
+        )
         self.workspace_half_size = float(workspace_half_size)
         self.object_push_prob = float(object_push_prob)
         self.approach_distance = _min_max("approach_distance", approach_distance)
         self.push_length = _min_max("push_length", push_length)
         self.lateral_noise = float(lateral_noise)
-        if not 0.0 < keep_inside <= 1.0:
-            raise ValueError(f"data.policy.keep_inside must lie in (0, 1], got {keep_inside}.")
+        require(0.0 < keep_inside <= 1.0, "keep_inside", keep_inside, "a number in (0, 1]")
         self.keep_inside = float(keep_inside)
         self.in_keys = [OBJECT_POS, EPISODE_SEED, STEP_COUNT]
         self.out_keys = [ACTION]

@@ -3,22 +3,20 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
-import numpy as np
 from dm_control.rl import control
 
-from kinet_rl.envs.blocks import BLOCK_SIZE_RANGES
-from kinet_rl.envs.scene import CAMERAS, blocks_scene_xml, ycb_scene_xml
+from kinet_rl.config_schema import check_arguments, require
+from kinet_rl.envs.scene import blocks_scene_xml, ycb_scene_xml
+from kinet_rl.envs.settings import MAX_OBJECTS, SceneSettings
 from kinet_rl.envs.task import PushObjects, PushPhysics, PushSettings
 from kinet_rl.envs.textures import table_texture_assets
 from kinet_rl.envs.workspace import workspace_for
 from kinet_rl.envs.ycb import load_ycb_objects
 
-__all__ = ["PushEnvironment", "make_dm_env", "make_env", "MAX_OBJECTS"]
-
-MAX_OBJECTS = 5
-BACKGROUNDS = ("fixed", "random")
+__all__ = ["PushEnvironment", "check_env_arguments", "make_dm_env", "make_env", "MAX_OBJECTS"]
 
 
 class PushEnvironment(control.Environment):
@@ -31,11 +29,6 @@ class PushEnvironment(control.Environment):
     def close(self) -> None:
         """Release rendering resources."""
         self.task.close()
-
-
-def _check_choice(name: str, value: object, choices: Sequence[object]) -> None:
-    if value not in choices:
-        raise ValueError(f"{name}={value!r} is not supported; choose one of {list(choices)}.")
 
 
 def make_dm_env(
@@ -65,16 +58,7 @@ def make_dm_env(
         ycb_objects: names of the YCB objects to draw from (default: all in the manifest).
         settings: push speeds and thresholds.
     """
-    _check_choice("task", task, ("blocks", "ycb"))
-    _check_choice("camera", camera, CAMERAS)
-    _check_choice("geometry", geometry, tuple(BLOCK_SIZE_RANGES))
-    _check_choice("background", background, BACKGROUNDS)
-    if not isinstance(num_objects, (int, np.integer)) or not 1 <= num_objects <= MAX_OBJECTS:
-        raise ValueError(
-            f"num_objects must be an integer from 1 to {MAX_OBJECTS}, got {num_objects!r}."
-        )
-    if not isinstance(image_size, (int, np.integer)) or image_size < 8:
-        raise ValueError(f"image_size must be an integer of at least 8 pixels, got {image_size!r}.")
+    SceneSettings(task, num_objects, camera, image_size, geometry, background)  # checks them
     workspace = workspace_for(task)
     candidates = None
     if task == "blocks":
@@ -143,3 +127,18 @@ def make_env(
     if max_steps is not None:
         env = TransformedEnv(env, StepCounter(max_steps=max_steps))
     return env
+
+
+def check_env_arguments(values: Mapping[str, Any]) -> SceneSettings:
+    """Checks :func:`make_env` keyword arguments (an ``env`` config group) without building.
+
+    Returns:
+        The scene they define.
+
+    Raises:
+        ConfigError: An unknown key, a wrong type or an out-of-range value, named.
+    """
+    args = check_arguments(make_env, values)
+    max_steps = args["max_steps"]
+    require(max_steps is None or max_steps >= 1, "max_steps", max_steps, "null or at least 1")
+    return SceneSettings.from_mapping(args)

@@ -2,14 +2,45 @@
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
+from kinet_rl.config_schema import require, settings_from
+from kinet_rl.envs.blocks import BLOCK_SIZE_RANGES
+from kinet_rl.envs.scene import CAMERAS
+
+TASKS = ("blocks", "ycb")
+MAX_OBJECTS = 5
+BACKGROUNDS = ("fixed", "random")
+#: Block geometries: ``train`` sizes and elongated out-of-distribution ``gen`` ones.
+GEOMETRIES = tuple(BLOCK_SIZE_RANGES)
+#: Smallest image side: the keypoint detector works on features at 1/4 resolution.
+MIN_IMAGE_SIZE = 16
+
+
+def _is_integer(value: Any) -> bool:
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def check_image_size(image_size: Any, key: str = "image_size") -> None:
+    """Raises ``ConfigError`` unless ``image_size`` is a multiple of 4 of at least 16 pixels."""
+    require(
+        _is_integer(image_size) and image_size % 4 == 0 and image_size >= MIN_IMAGE_SIZE,
+        key,
+        image_size,
+        f"a multiple of 4 of at least {MIN_IMAGE_SIZE} pixels (e.g. 32, 64)",
+    )
+
 
 @dataclass(frozen=True)
 class SceneSettings:
-    """Arguments of :func:`kinet_rl.envs.make_dm_env` that define a scene (not its seed)."""
+    """Arguments of :func:`kinet_rl.envs.make_dm_env` that define a scene (not its seed).
+
+    Raises:
+        ConfigError: A value out of range (e.g. ``num_objects`` outside 1-5), naming it.
+    """
 
     task: str = "blocks"
     num_objects: int = 3
@@ -18,11 +49,28 @@ class SceneSettings:
     geometry: str = "train"
     background: str = "fixed"
 
+    def __post_init__(self) -> None:
+        for name, choices in (
+            ("task", TASKS),
+            ("camera", CAMERAS),
+            ("geometry", GEOMETRIES),
+            ("background", BACKGROUNDS),
+        ):
+            value = getattr(self, name)
+            require(value in choices, name, value, f"one of {list(choices)}")
+        require(
+            _is_integer(self.num_objects) and 1 <= self.num_objects <= MAX_OBJECTS,
+            "num_objects",
+            self.num_objects,
+            f"an integer from 1 to {MAX_OBJECTS}",
+        )
+        check_image_size(self.image_size)
+
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any]) -> SceneSettings:
         """The scene of an env config (extra keys such as ``seed`` or ``max_steps`` are ignored)."""
         names = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in values.items() if k in names})
+        return settings_from(cls, {k: v for k, v in values.items() if k in names})
 
     def as_dict(self) -> dict[str, Any]:
         """Plain-container form (for JSON and checkpoints)."""

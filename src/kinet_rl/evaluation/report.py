@@ -12,6 +12,7 @@ import torch
 from torchrl.record.loggers import Logger
 
 from kinet_rl.atomic import atomic_write_text
+from kinet_rl.config_schema import at_least, require
 from kinet_rl.devices import model_device
 from kinet_rl.envs.geometry import SceneGeometry, normalised_to_pixels
 from kinet_rl.evaluation.forward import (
@@ -48,6 +49,16 @@ class ReportSettings:
     horizons: tuple[int, ...] = (1, 5, 10)
     num_sequences: int = 256
     rearrangement_episodes: int = 2
+
+    def __post_init__(self) -> None:
+        require(
+            bool(self.horizons) and min(self.horizons) >= 1,
+            "horizons",
+            list(self.horizons),
+            "a non-empty list of integers of at least 1",
+        )
+        at_least(self, 1, "num_sequences")
+        at_least(self, 0, "rearrangement_episodes")
 
 
 def hit_radius(image_size: int) -> float:

@@ -153,7 +153,10 @@ class KeypointDetector(nn.Module):
     ) -> None:
         super().__init__()
         if num_keypoints < 1 or feat_dim < 1 or channels < 1:
-            raise ValueError("num_keypoints, feat_dim and channels must be positive.")
+            raise ValueError(
+                "num_keypoints, feat_dim and channels must be positive, got "
+                f"{num_keypoints}, {feat_dim} and {channels}."
+            )
         if feature_grad not in FEATURE_GRADS:
             raise ValueError(f"feature_grad={feature_grad!r}; choose one of {FEATURE_GRADS}.")
         self.feature_grad = feature_grad

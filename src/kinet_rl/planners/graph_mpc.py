@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Mapping
+from typing import Any
 
 import torch
 from tensordict import NestedKey, TensorDictBase
@@ -12,11 +14,14 @@ from torchrl.data import Bounded, Unbounded
 from torchrl.envs import EnvBase
 from torchrl.modules.planners import MPCPlannerBase
 
+from kinet_rl.config_schema import check_arguments, require
 from kinet_rl.keys import ACTION, REWARD
 
 logger = logging.getLogger(__name__)
 
 UPDATE_RULES = ("cem", "mppi")
+#: :class:`GraphMPCPlanner` arguments that code passes, not planner settings.
+CODE_ARGUMENTS = ("env", "reward_key", "action_key", "generator")
 IS_INIT = "is_init"  # written by torchrl's InitTracker transform
 
 
@@ -101,11 +106,8 @@ class GraphMPCPlanner(MPCPlannerBase):
             temperature=temperature,
             min_std=min_std,
             max_std=max_std,
+            keep_elites=keep_elites,
         )
-        if not 0 <= keep_elites <= min(top_k, num_candidates - 1):
-            raise ValueError(
-                f"keep_elites must lie in [0, min(top_k, num_candidates - 1)], got {keep_elites}."
-            )
         super().__init__(env=env, action_key=action_key)
         self.planning_horizon = planning_horizon
         self.optim_steps = optim_steps
@@ -301,6 +303,16 @@ def _as_tuple(key: NestedKey) -> tuple[str, ...]:
     return (key,) if isinstance(key, str) else tuple(key)
 
 
+def check_planner_settings(settings: Mapping[str, Any]) -> None:
+    """Checks :class:`GraphMPCPlanner` keyword arguments (a ``planner`` config) without an env.
+
+    Raises:
+        ConfigError: An unknown key, a wrong type or a value the planner refuses (e.g.
+            ``top_k > num_candidates``), named.
+    """
+    _check_arguments(**check_arguments(GraphMPCPlanner, settings, exclude=CODE_ARGUMENTS))
+
+
 def _check_arguments(
     *,
     planning_horizon: int,
@@ -311,6 +323,8 @@ def _check_arguments(
     temperature: float,
     min_std: float,
     max_std: float,
+    keep_elites: int,
+    **_: Any,
 ) -> None:
     for name, value in (
         ("planning_horizon", planning_horizon),
@@ -318,17 +332,19 @@ def _check_arguments(
         ("num_candidates", num_candidates),
         ("top_k", top_k),
     ):
-        if int(value) != value or value < 1:
-            raise ValueError(f"{name} must be a positive integer, got {value!r}.")
-    if top_k > num_candidates:
-        raise ValueError(
-            f"top_k ({top_k}) must not exceed num_candidates ({num_candidates}); lower top_k."
-        )
-    if update_rule not in UPDATE_RULES:
-        raise ValueError(f"update_rule must be one of {UPDATE_RULES}, got {update_rule!r}.")
-    if not temperature > 0:
-        raise ValueError(f"temperature must be > 0, got {temperature!r}.")
-    if not 0 < min_std <= max_std:
-        raise ValueError(
-            f"Need 0 < min_std <= max_std, got min_std={min_std!r}, max_std={max_std!r}."
-        )
+        require(int(value) == value and value >= 1, name, value, "a positive integer")
+    require(
+        top_k <= num_candidates,
+        "top_k",
+        top_k,
+        f"at most num_candidates={num_candidates}",
+    )
+    require(update_rule in UPDATE_RULES, "update_rule", update_rule, f"one of {UPDATE_RULES}")
+    require(temperature > 0, "temperature", temperature, "a number > 0")
+    require(0 < min_std <= max_std, "min_std", min_std, f"in (0, max_std={max_std}]")
+    require(
+        0 <= keep_elites <= min(top_k, num_candidates - 1),
+        "keep_elites",
+        keep_elites,
+        "an integer in [0, min(top_k, num_candidates - 1)]",
+    )

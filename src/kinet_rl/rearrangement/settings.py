@@ -9,7 +9,9 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any, Literal
 
-from kinet_rl.envs.settings import SceneSettings
+from kinet_rl.config_schema import at_least, check_keys, config_group, require, settings_from
+from kinet_rl.envs.settings import BACKGROUNDS, GEOMETRIES, MAX_OBJECTS, SceneSettings
+from kinet_rl.planners.graph_mpc import check_planner_settings
 
 #: The comparison's methods by default (names of :data:`kinet_rl.rearrangement.methods.METHODS`).
 DEFAULT_METHODS = (
@@ -41,6 +43,13 @@ class TaskSettings:
     min_goal_distance: float = 0.03
     success_threshold: float = 0.03
     max_goal_tries: int = 20
+
+    def __post_init__(self) -> None:
+        at_least(self, 1, "num_steps", "goal_pushes", "max_goal_tries")
+        at_least(self, 0, "min_goal_distance")
+        require(
+            self.success_threshold > 0, "success_threshold", self.success_threshold, "metres > 0"
+        )
 
 
 def planner_budget(optim_steps: int, num_candidates: int, top_k: int) -> dict[str, Any]:
@@ -124,10 +133,24 @@ class RearrangementSettings:
     kinet_method: str = "kinet_graph_distance"
 
     def __post_init__(self) -> None:
-        if self.episodes < 1 or self.task.num_steps < 1:
-            raise ValueError("episodes and task.num_steps must be at least 1.")
-        if self.split not in SPLIT_SEEDS:
-            raise ValueError(f"eval.split={self.split!r}; choose one of {list(SPLIT_SEEDS)}.")
+        at_least(self, 1, "episodes", "generalization_episodes")
+        at_least(self, 0, "videos")
+        require(self.split in SPLIT_SEEDS, "split", self.split, f"one of {list(SPLIT_SEEDS)}")
+        require(
+            self.oracle_contact_radius > 0,
+            "oracle_contact_radius",
+            self.oracle_contact_radius,
+            "metres > 0",
+        )
+        for name, allowed, choices in (
+            ("num_objects", f"integers from 1 to {MAX_OBJECTS}", range(1, MAX_OBJECTS + 1)),
+            ("geometries", f"names from {list(GEOMETRIES)}", GEOMETRIES),
+            ("backgrounds", f"names from {list(BACKGROUNDS)}", BACKGROUNDS),
+        ):
+            values = getattr(self, name)
+            require(all(v in choices for v in values), name, list(values), f"a list of {allowed}")
+        with config_group("planner"):
+            check_planner_settings(self.planner)
 
     @property
     def first_seed(self) -> int:
@@ -138,22 +161,21 @@ class RearrangementSettings:
     def from_dicts(
         cls, eval_cfg: Mapping[str, Any], env_cfg: Mapping[str, Any]
     ) -> RearrangementSettings:
-        """Builds settings from plain dicts: the ``eval`` group and the ``env`` group of a run."""
+        """Builds settings from plain dicts: the ``eval`` group and the ``env`` group of a run.
+
+        Raises:
+            ConfigError: An unknown key, a wrong type or an out-of-range value, named.
+        """
         task_names = {f.name for f in fields(TaskSettings)}
-        task = TaskSettings(**{k: v for k, v in eval_cfg.items() if k in task_names})
         own = {f.name for f in fields(cls)} - {"scene", "task"}
-        unknown = set(eval_cfg) - own - task_names
-        if unknown:
-            raise ValueError(
-                f"Unknown rearrangement settings {sorted(unknown)}; allowed: {sorted(own | task_names)}."
-            )
+        check_keys(eval_cfg, own | task_names)
+        task = settings_from(TaskSettings, {k: v for k, v in eval_cfg.items() if k in task_names})
         kwargs = {k: v for k, v in eval_cfg.items() if k in own}
         for key in ("methods", "num_objects", "geometries", "backgrounds"):
-            if key in kwargs:
-                kwargs[key] = tuple(kwargs[key] or ())
-        if "planner" in kwargs:
-            kwargs["planner"] = dict(kwargs["planner"])
-        return cls(scene=SceneSettings.from_mapping(env_cfg), task=task, **kwargs)
+            if key in kwargs and kwargs[key] is None:
+                kwargs[key] = ()
+        scene = SceneSettings.from_mapping(env_cfg)
+        return settings_from(cls, {"scene": scene, "task": task, **kwargs})
 
     def as_dict(self) -> dict[str, Any]:
         """Plain-container form (for JSON)."""

@@ -14,6 +14,7 @@ from torch import nn
 from torchrl.record.loggers import Logger
 from tqdm.auto import tqdm
 
+from kinet_rl.config_schema import at_least, require
 from kinet_rl.interrupts import deferred_interrupts
 from kinet_rl.training.checkpoint import TrainingCheckpoint
 from kinet_rl.training.distributed import DistContext, mean_across_processes, wrap_data_parallel
@@ -70,6 +71,18 @@ class TrainerSettings:
     seed: int = 0
     steps_per_episode: int = 1
     horizon: int = 1
+
+    def __post_init__(self) -> None:
+        at_least(self, 0, "steps", "grad_clip", "seed")
+        at_least(self, 1, "batch_size", "log_every", "eval_every", "checkpoint_every")
+        at_least(self, 1, "val_batches", "steps_per_episode", "horizon")
+        require(self.lr > 0, "lr", self.lr, "a number > 0")
+        require(
+            self.batch_size % self.steps_per_episode == 0,
+            "steps_per_episode",
+            self.steps_per_episode,
+            f"a divisor of batch_size={self.batch_size}",
+        )
 
 
 Validator = Callable[[int], dict[str, float]]
