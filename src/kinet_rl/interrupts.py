@@ -59,7 +59,9 @@ def worker_processes(start: Callable[[], T], stop: Callable[[T], None]) -> Itera
     # Another thread of this process (torch's, tqdm's) may take a process-directed SIGINT that the
     # mask holds back from this one; a handler that only records it covers that case.
     main = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: pending.append(signum)) if main else None
+    previous = (
+        signal.signal(signal.SIGINT, lambda signum, frame: pending.append(signum)) if main else None
+    )
     try:
         mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
