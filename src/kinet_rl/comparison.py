@@ -128,7 +128,7 @@ def mpc_table(
 ) -> str:
     """MPC table: final distance (mm, mean ± 95% interval) and success rate; ``mpc[row]`` = episode stats.
 
-    ``kinet_method`` names the planner of the KINet rows (``kinet_graph`` or ``kinet_graph_distance``).
+    ``kinet_method`` names the planner of the KINet rows (a KINet method of ``METHODS``).
     """
     lines = [
         f"| model | planner | episodes | start (mm) | after T = {num_steps} (mm) | success |",

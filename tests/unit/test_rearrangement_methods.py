@@ -12,8 +12,11 @@ from kinet_rl.rearrangement.settings import DEFAULT_METHODS, Condition, Rearrang
 def test_every_method_is_declared_once_with_a_label() -> None:
     assert set(DEFAULT_METHODS) < set(METHODS) and "model_mpc" in METHODS
     assert all(name == method.name and method.label for name, method in METHODS.items())
-    graph = [m.name for m in METHODS.values() if m.graph]
-    assert graph == ["kinet_graph", "kinet_graph_dot", "kinet_graph_distance"]
+    kinet = [m.name for m in METHODS.values() if m.needs == "kinet"]
+    assert kinet == [
+        "kinet_graph", "kinet_graph_dot", "kinet_graph_distance", "kinet_keypoints",
+        "kinet_keypoints_l2",
+    ]  # fmt: skip
     assert {m.name for m in METHODS.values() if m.needs is None} == {"random", "oracle"}
 
 
@@ -22,7 +25,7 @@ def test_bad_methods_are_reported() -> None:
     with pytest.raises(ValueError, match="Unknown methods"):
         check_methods(RearrangementSettings(methods=("kinet_graph", "teleport")))
     with pytest.raises(ValueError, match="kinet_method"):
-        check_methods(RearrangementSettings(kinet_method="kinet_keypoints"))
+        check_methods(RearrangementSettings(kinet_method="oracle"))
 
 
 def test_models_that_cannot_plan_a_method_are_reported(tiny_kinet) -> None:

@@ -62,7 +62,6 @@ class Method:
         observes: The observation entries its controller is handed each step: learned-model
             controllers see only what a real robot's camera gives (``pixels``); the GT-state
             baselines and the oracle also get ``object_pos``.
-        graph: Whether it plans on KINet's goal graph (it may then be ``kinet_method``).
     """
 
     name: str
@@ -70,7 +69,6 @@ class Method:
     needs: ModelKind
     make_controller: Callable[[MethodContext], Controller]
     observes: tuple[str, ...]
-    graph: bool = False
 
     def check_model(self, model: nn.Module | None) -> None:
         """Raises ``ValueError``/``TypeError`` naming the problem if this method cannot use ``model``."""
@@ -118,7 +116,6 @@ METHODS: dict[str, Method] = {
             "kinet",
             _kinet(GraphSimilarityReward),
             IMAGES,
-            graph=True,
         ),
         Method(
             "kinet_graph_dot",
@@ -126,7 +123,6 @@ METHODS: dict[str, Method] = {
             "kinet",
             _kinet(lambda: GraphSimilarityReward("dot")),
             IMAGES,
-            graph=True,
         ),
         Method(
             "kinet_graph_distance",
@@ -134,7 +130,6 @@ METHODS: dict[str, Method] = {
             "kinet",
             _kinet(GraphDistanceReward),
             IMAGES,
-            graph=True,
         ),
         Method(
             "kinet_keypoints",
@@ -170,9 +165,9 @@ def check_methods(settings: RearrangementSettings) -> None:
     unknown = [m for m in settings.methods if m not in METHODS]
     if unknown:
         raise ValueError(f"Unknown methods {unknown}; choose from {list(METHODS)}.")
-    graph_methods = [m.name for m in METHODS.values() if m.graph]
-    if settings.kinet_method not in graph_methods:
-        raise ValueError(f"kinet_method={settings.kinet_method!r}; choose one of {graph_methods}.")
+    kinet_methods = [m.name for m in METHODS.values() if m.needs == "kinet"]
+    if settings.kinet_method not in kinet_methods:
+        raise ValueError(f"kinet_method={settings.kinet_method!r}; choose one of {kinet_methods}.")
 
 
 def check_model(conditions: Iterable[Condition], model: nn.Module | None) -> None:

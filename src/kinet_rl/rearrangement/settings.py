@@ -53,12 +53,14 @@ class TaskSettings:
 
 
 def planner_budget(optim_steps: int, num_candidates: int, top_k: int) -> dict[str, Any]:
-    """:class:`~kinet_rl.planners.GraphMPCPlanner` settings of a one-push-horizon budget."""
+    """:class:`~kinet_rl.planners.GraphMPCPlanner` settings of a one-push-horizon budget that acts
+    on the best sequence scored (``return_best``, chosen on validation episodes)."""
     return {
         "planning_horizon": 1,
         "optim_steps": optim_steps,
         "num_candidates": num_candidates,
         "top_k": top_k,
+        "return_best": True,
     }
 
 
@@ -130,7 +132,7 @@ class RearrangementSettings:
     workers: int = 2
     split: Split = "test"
     videos: int = 1
-    kinet_method: str = "kinet_graph_distance"
+    kinet_method: str = "kinet_keypoints_l2"
 
     def __post_init__(self) -> None:
         at_least(self, 1, "episodes", "generalization_episodes")
