@@ -129,7 +129,7 @@ class EdgeLayout:
 
     def pairs_of(self, matrix: Tensor) -> Tensor:
         """Entries ``[i, k]`` of ``[*B, K, K, F]`` matrices, in this layout: ``[*B, K, P, F]``."""
-        return matrix.flatten(-3, -2)[..., self.matrix_index, :]
+        return _gather_rows(matrix.flatten(-3, -2), self.matrix_index)
 
     def to_matrix(self, values: Tensor) -> Tensor:
         """``[*B, K, P]`` edge values as ``[*B, K, K]`` matrices (entry ``[i, k]``), 0 elsewhere."""
@@ -140,7 +140,7 @@ class EdgeLayout:
 
     def reversed(self, values: Tensor) -> Tensor:
         """Each edge's value ``[*B, K, P, F]`` replaced by that of its reverse edge."""
-        return values.flatten(-3, -2)[..., self.reverse, :]
+        return _gather_rows(values.flatten(-3, -2), self.reverse)
 
     def pair_mlp(self, net: nn.Sequential, nodes: Tensor, edges: Tensor | None = None) -> Tensor:
         """``net([n_i, n_k(, e_ik)])`` on every stored edge: ``[*B, K, P, out]``.
@@ -157,11 +157,16 @@ class EdgeLayout:
         layer = _first_layer(net)
         e = nodes.shape[-1]
         sender, receiver, edge = layer.weight.split([e, e, layer.in_features - 2 * e], dim=-1)
-        hidden = F.linear(nodes, sender, layer.bias)[..., self.senders, :]  # [*B, K, P, H]
+        hidden = _gather_rows(F.linear(nodes, sender, layer.bias), self.senders)  # [*B, K, P, H]
         hidden += F.linear(nodes, receiver).unsqueeze(-2)
         if edges is not None:
             hidden = add_linear(hidden, edges, edge)
         return _after_first_layer(net, hidden)
+
+
+def _gather_rows(values: Tensor, index: Tensor) -> Tensor:
+    """``values[..., index, :]``: the rows of ``[*B, M, F]`` at ``index`` ``[K, P]``."""
+    return values.index_select(-2, index.flatten()).unflatten(-2, index.shape)
 
 
 @functools.lru_cache(maxsize=64)
