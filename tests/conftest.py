@@ -48,11 +48,11 @@ def conf_dir() -> Path:
 
 @pytest.fixture
 def tiny_kinet() -> Callable[..., KINetWorldModel]:
-    """Builds a tiny, untrained KINet (``TINY_KINET``, in eval mode) seeded by ``seed``."""
+    """Builds a tiny, untrained KINet (``TINY_KINET`` with ``overrides``, in eval mode)."""
 
-    def make(seed: int = 0) -> KINetWorldModel:
+    def make(seed: int = 0, **overrides) -> KINetWorldModel:
         torch.manual_seed(seed)
-        return KINetWorldModel(**TINY_KINET).eval()
+        return KINetWorldModel(**{**TINY_KINET, **overrides}).eval()
 
     return make
 

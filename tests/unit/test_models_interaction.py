@@ -74,7 +74,7 @@ def test_each_round_updates_the_edge_features_it_passes_on():
     net = make_net().eval()
     calls: list[tuple[torch.Tensor, torch.Tensor]] = []
     net.edge_update.register_forward_hook(lambda m, inp, out: calls.append((inp[0], out)))
-    net(*graph_inputs())
+    net(*graph_inputs(), fast=False)  # the straightforward path calls f_edge on [n_i, n_j, e]
     assert len(calls) == net.num_rounds
     embed = calls[0][1].shape[-1]
     for (inp, out), (next_inp, _) in zip(calls, calls[1:], strict=False):

@@ -5,9 +5,12 @@ Reference: KINet, Rezazadeh et al., RA-L 2023, Sec. 3.2-3.4.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor, nn
 
 from kinet_rl.planners.model_env import ACTION_DIM
@@ -34,18 +37,153 @@ def edge_geometry(pos: Tensor) -> Tensor:
         pos: ``[*B, K, 2]`` keypoints.
 
     Returns:
-        ``[*B, K, K, 3]``; the diagonal (self-loops) is present but masked out downstream.
+        ``[*B, K, K, 3]``, entry ``[i, j]`` for the edge from ``i`` to ``j`` (diagonal: self-loops).
     """
     diff = pos.unsqueeze(-2) - pos.unsqueeze(-3)
     return torch.cat([diff, diff.pow(2).sum(-1, keepdim=True)], dim=-1)
 
 
-def pairs(nodes: Tensor) -> tuple[Tensor, Tensor]:
-    """Broadcasts ``[*B, K, D]`` node tensors to sender/receiver pairs ``[*B, K, K, D]`` (i, j)."""
-    k = nodes.shape[-2]
-    first = nodes.unsqueeze(-2).expand(*nodes.shape[:-1], k, nodes.shape[-1])
-    second = nodes.unsqueeze(-3).expand(*nodes.shape[:-2], k, k, nodes.shape[-1])
-    return first, second
+def concat(parts: Sequence[Tensor]) -> Tensor:
+    """``cat(parts, -1)`` after broadcasting the parts' leading dims against each other."""
+    shape = torch.broadcast_shapes(*(part.shape[:-1] for part in parts))
+    return torch.cat([part.expand(*shape, part.shape[-1]) for part in parts], dim=-1)
+
+
+def add_linear(acc: Tensor, x: Tensor, weight: Tensor) -> Tensor:
+    """``acc + x W^T`` (leading dims broadcast), one ``addmm`` when they are the same."""
+    if acc.shape[:-1] != x.shape[:-1]:
+        return acc + F.linear(x, weight)
+    flat = torch.addmm(acc.reshape(-1, acc.shape[-1]), x.reshape(-1, x.shape[-1]), weight.t())
+    return flat.view(acc.shape)
+
+
+def mlp_of_parts(net: nn.Sequential, parts: Sequence[Tensor], split: bool) -> Tensor:
+    """``net(concat(parts))``; with ``split``, its first layer is applied part by part.
+
+    The first layer is ``W concat(parts) + b = sum_p W_p x_p + b``. With ``split`` each term is
+    computed at its part's own shape, so a part shared by many rows (a start state by all
+    candidates) is multiplied once, and the terms broadcast-sum.
+
+    Args:
+        net: An :func:`mlp`.
+        parts: Inputs ``[*B_p, D_p]`` whose leading dims broadcast.
+        split: Split the first layer instead of one matmul over the broadcast concatenation.
+    """
+    if not split:
+        return net(concat(parts))
+    layer = _first_layer(net)
+    weights = layer.weight.split([part.shape[-1] for part in parts], dim=-1)
+    hidden = F.linear(parts[0], weights[0], layer.bias)
+    for part, weight in zip(parts[1:], weights[1:], strict=True):
+        hidden = add_linear(hidden, part, weight)
+    return _after_first_layer(net, hidden)
+
+
+def _first_layer(net: nn.Sequential) -> nn.Linear:
+    layer = net[0]
+    if not isinstance(layer, nn.Linear):
+        raise TypeError(f"Expected an mlp() starting with nn.Linear, got {type(layer).__name__}.")
+    return layer
+
+
+def _after_first_layer(net: nn.Sequential, hidden: Tensor) -> Tensor:
+    """The layers of ``net`` after the first on its pre-activation ``hidden``.
+
+    ReLUs run in place: ``hidden`` and every layer output are fresh tensors of this computation.
+    """
+    for layer in list(net)[1:]:
+        hidden = torch.relu_(hidden) if isinstance(layer, nn.ReLU) else layer(hidden)
+    return hidden
+
+
+@dataclass(frozen=True, eq=False)
+class EdgeLayout:
+    """Where the directed edges ``(sender i, receiver k)`` of a ``K``-node graph are stored.
+
+    Edge tensors are ``[*B, K, P, *F]``: receiver ``k``, then its ``P`` senders ``senders[k]``,
+    so that a node's incoming messages are a sum over one dim. The fast layout holds the
+    ``K (K - 1)`` edges without self-loops and multiplies the pair MLPs' per-node inputs by their
+    first-layer weights once per node, not once per edge; the straightforward one holds
+    all ``K^2`` pairs (self-loops masked out) and runs the pair MLPs on concatenations. Both
+    compute the same function (``fast`` of :meth:`KeypointInteractionNet.forward`).
+
+    Attributes:
+        fast: Which of the two layouts this is.
+        senders: ``[K, P]`` sender of each stored edge.
+        matrix_index: ``[K, P]`` flat index ``i * K + k`` of each edge in a ``[K, K]`` matrix.
+        reverse: ``[K, P]`` flat index (into ``K * P``) of each edge's reverse ``(k, i)``.
+        mask: ``[K, P]`` 0 on self-loops, 1 elsewhere; None when no self-loop is stored.
+    """
+
+    fast: bool
+    senders: Tensor
+    matrix_index: Tensor
+    reverse: Tensor
+    mask: Tensor | None
+
+    @property
+    def num_edges(self) -> int:
+        """Number of edges without self-loops, ``K (K - 1)`` (at least 1, as a divisor)."""
+        k = self.senders.shape[0]
+        return max(k * (k - 1), 1)
+
+    def pairs_of(self, matrix: Tensor) -> Tensor:
+        """Entries ``[i, k]`` of ``[*B, K, K, F]`` matrices, in this layout: ``[*B, K, P, F]``."""
+        return _gather_rows(matrix.flatten(-3, -2), self.matrix_index)
+
+    def to_matrix(self, values: Tensor) -> Tensor:
+        """``[*B, K, P]`` edge values as ``[*B, K, K]`` matrices (entry ``[i, k]``), 0 elsewhere."""
+        k = self.senders.shape[0]
+        flat = values.new_zeros(*values.shape[:-2], k * k)
+        flat = flat.index_copy(-1, self.matrix_index.flatten(), values.flatten(-2))
+        return flat.unflatten(-1, (k, k))
+
+    def reversed(self, values: Tensor) -> Tensor:
+        """Each edge's value ``[*B, K, P, F]`` replaced by that of its reverse edge."""
+        return _gather_rows(values.flatten(-3, -2), self.reverse)
+
+    def pair_mlp(self, net: nn.Sequential, nodes: Tensor, edges: Tensor | None = None) -> Tensor:
+        """``net([n_i, n_k(, e_ik)])`` on every stored edge: ``[*B, K, P, out]``.
+
+        Args:
+            net: An :func:`mlp` over ``2 E (+ E')`` inputs.
+            nodes: ``[*B, K, E]`` node embeddings.
+            edges: Optional ``[*B', K, P, E']`` edge embeddings (leading dims broadcast).
+        """
+        if not self.fast:
+            parts = [nodes[..., self.senders, :], nodes.unsqueeze(-2)]
+            return net(concat(parts if edges is None else [*parts, edges]))
+        # the first layer W [n_i, n_k, e_ik] + b = (W_s n + b)_i + (W_r n)_k + W_e e_ik
+        layer = _first_layer(net)
+        e = nodes.shape[-1]
+        sender, receiver, edge = layer.weight.split([e, e, layer.in_features - 2 * e], dim=-1)
+        hidden = _gather_rows(F.linear(nodes, sender, layer.bias), self.senders)  # [*B, K, P, H]
+        hidden += F.linear(nodes, receiver).unsqueeze(-2)
+        if edges is not None:
+            hidden = add_linear(hidden, edges, edge)
+        return _after_first_layer(net, hidden)
+
+
+def _gather_rows(values: Tensor, index: Tensor) -> Tensor:
+    """``values[..., index, :]``: the rows of ``[*B, M, F]`` at ``index`` ``[K, P]``."""
+    return values.index_select(-2, index.flatten()).unflatten(-2, index.shape)
+
+
+@functools.lru_cache(maxsize=64)
+def edge_layout(num_nodes: int, fast: bool, device: torch.device) -> EdgeLayout:
+    """The :class:`EdgeLayout` of ``num_nodes`` nodes (fast: without self-loops) on ``device``."""
+    k = num_nodes
+    everyone = torch.arange(k, device=device)
+    senders = everyone.expand(k, k)  # [K, K]: every node sends to every node
+    if fast:
+        self_loop = torch.eye(k, dtype=torch.bool, device=device)
+        senders = senders[~self_loop].reshape(k, k - 1)
+    receivers = everyone.unsqueeze(-1).expand_as(senders)
+    slot = torch.full((k, k), -1, dtype=torch.long, device=device)  # [receiver, sender] -> slot
+    slot[receivers, senders] = torch.arange(senders.shape[1], device=device).expand_as(senders)
+    reverse = senders * senders.shape[1] + slot[senders, receivers]
+    mask = None if fast else (senders != receivers).float()
+    return EdgeLayout(fast, senders, senders * k + receivers, reverse, mask)
 
 
 def graph_similarity(nodes_a: Tensor, nodes_b: Tensor) -> Tensor:
@@ -168,65 +306,88 @@ class KeypointInteractionNet(nn.Module):
             )
         return self.node_encoder(torch.cat([feat, pos], dim=-1))
 
-    def _edge_prob(self, nodes: Tensor) -> tuple[Tensor, Tensor]:
-        """Edge weights ``[*B, K, K]`` (diagonal 0) and per-graph mean KL ``[*B]``."""
+    def _edge_prob(
+        self, nodes: Tensor, layout: EdgeLayout, batch: torch.Size
+    ) -> tuple[Tensor, Tensor]:
+        """Edge weights ``[*B, K, P]`` (0 on self-loops) and per-graph mean KL ``[*B]``.
+
+        ``nodes`` ``[*S, K, E]`` may have fewer or size-1 leading dims than ``batch``: the
+        posterior is computed at the nodes' shape, the sampling noise (training) at ``batch``;
+        both outputs are returned at the smallest shape that broadcasts to ``batch``.
+        """
         k = nodes.shape[-2]
-        off_diag = ~torch.eye(k, dtype=torch.bool, device=nodes.device)
         if self.edge_posterior is None:
-            return off_diag.to(nodes.dtype).expand(*nodes.shape[:-2], k, k), nodes.new_zeros(
-                nodes.shape[:-2]
-            )
-        stats = self.edge_posterior(torch.cat(pairs(nodes), dim=-1))
-        stats = 0.5 * (stats + stats.transpose(-2, -3))  # undirected: (i, j) == (j, i)
+            prob = nodes.new_ones(k, layout.senders.shape[1])
+            return prob if layout.mask is None else layout.mask.to(prob), nodes.new_zeros(())
+        stats = layout.pair_mlp(self.edge_posterior, nodes)
+        stats = 0.5 * (stats + layout.reversed(stats))  # undirected: (i, j) == (j, i)
         mean, log_std = stats.unbind(-1)
         log_std = log_std.clamp(-6.0, 3.0)
         logit = mean
         if self.training:
-            noise = torch.randn_like(mean)
+            noise = torch.randn((*batch, k, k), dtype=mean.dtype, device=mean.device)
             noise = (noise + noise.transpose(-1, -2)) / 2**0.5  # symmetric, unit variance off-diag
-            logit = mean + noise * log_std.exp()
-        prob = torch.sigmoid(logit) * off_diag
-        num_edges = max(k * (k - 1), 1)
-        kl = (gaussian_kl_to_standard(mean, log_std) * off_diag).sum(dim=(-2, -1)) / num_edges
-        return prob, kl
+            logit = mean + layout.pairs_of(noise.unsqueeze(-1)).squeeze(-1) * log_std.exp()
+        prob = torch.sigmoid(logit)
+        kl = gaussian_kl_to_standard(mean, log_std)
+        if layout.mask is not None:
+            prob, kl = prob * layout.mask, kl * layout.mask
+        return prob, kl.sum(dim=(-2, -1)) / layout.num_edges
 
-    def forward(self, pos: Tensor, feat: Tensor, action: Tensor) -> GraphPrediction:
+    def forward(
+        self, pos: Tensor, feat: Tensor, action: Tensor, fast: bool = True
+    ) -> GraphPrediction:
         """Predicts the next keypoints and graph.
+
+        The graph's leading dims may broadcast against the action's: one start graph
+        ``[*B, 1, K, .]`` with candidate pushes ``[*B, N, 4]`` computes what does not depend on
+        the push (node and edge encodings, edge posterior, first edge update) once and broadcasts
+        it over the candidates.
 
         Args:
             pos: ``[*B, K, 2]`` keypoints ``x_t`` in ``[-1, 1]``.
             feat: ``[*B, K, D]`` keypoint features ``phi_t``.
             action: ``[*B, 4]`` push ``(start x, start y, end x, end y)``.
+            fast: Edges without self-loops and pair MLPs split per node (see
+                :class:`EdgeLayout`); False runs the straightforward computation (all ``K^2``
+                pairs, every MLP on a concatenation), the same function with more arithmetic.
 
         Returns:
-            :class:`GraphPrediction`.
+            :class:`GraphPrediction` with the broadcast batch dims.
         """
-        if action.shape[-1] != ACTION_DIM or action.shape[:-1] != pos.shape[:-2]:
+        try:
+            batch = torch.broadcast_shapes(pos.shape[:-2], action.shape[:-1])
+        except RuntimeError:
+            batch = None
+        if action.shape[-1] != ACTION_DIM or batch is None:
             raise ValueError(
                 f"Expected action [*B, {ACTION_DIM}] matching pos [*B, K, 2]; got "
                 f"{tuple(action.shape)} and {tuple(pos.shape)}."
             )
+        k = pos.shape[-2]
+        layout = edge_layout(k, fast, pos.device)
         nodes = self.embed_nodes(pos, feat)
-        edges = self.edge_encoder(edge_geometry(pos))
-        prob, kl = self._edge_prob(nodes)
+        edges = self.edge_encoder(layout.pairs_of(edge_geometry(pos)))
+        prob, kl = self._edge_prob(nodes, layout, batch)
         # [*B, K, 2, 2]: push start and end relative to each keypoint
         points = action.reshape(*action.shape[:-1], 1, 2, 2)
         if self.action_to_image is not None:
             points = self.action_to_image(points)
-        action_rel = points - pos.unsqueeze(-2)
+        action_rel = (points - pos.unsqueeze(-2)).flatten(-2)
         action_in = torch.cat(
-            [action.unsqueeze(-2).expand(*pos.shape[:-1], ACTION_DIM), action_rel.flatten(-2)], -1
+            [action.unsqueeze(-2).expand(*batch, k, ACTION_DIM), action_rel.expand(*batch, k, -1)],
+            -1,
         )
         hidden = nodes
         for _ in range(self.num_rounds):
-            first, second = pairs(hidden)
-            edges = self.edge_update(torch.cat([first, second, edges], dim=-1))
-            aggregated = (prob.unsqueeze(-1) * edges).sum(dim=-3)  # sum over senders i of e'_ik
-            hidden = hidden + self.node_update(torch.cat([hidden, aggregated, action_in], dim=-1))
+            edges = layout.pair_mlp(self.edge_update, hidden, edges)
+            aggregated = (prob.unsqueeze(-1) * edges).sum(dim=-2)  # sum over senders i of e'_ik
+            update = mlp_of_parts(self.node_update, [hidden, aggregated, action_in], split=fast)
+            hidden = hidden + update
         return GraphPrediction(
             next_pos=pos + self.state_decoder(hidden),
             next_nodes=hidden,
-            nodes=nodes,
-            edge_prob=prob,
-            kl=kl,
+            nodes=nodes.expand(*batch, *nodes.shape[-2:]),
+            edge_prob=layout.to_matrix(prob).expand(*batch, k, k),
+            kl=kl.expand(batch),
         )

@@ -5,6 +5,7 @@ Reference: KINet, Rezazadeh et al., RA-L 2023, Sec. 3.4 (GraphMPC).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Protocol
 
 import torch
@@ -129,20 +130,64 @@ REWARDS: dict[str, type[KINetReward]] = {
 }
 
 
-class _GraphStep(nn.Module):
-    """One imagined push with the interaction net; reward from the predicted next graph."""
+def narrow_broadcast_dims(*tensors: Tensor, event_dims: int) -> tuple[Tensor, ...]:
+    """Views of ``tensors`` with each leading dim that is a broadcast in all of them narrowed to 1.
 
-    def __init__(self, interaction: KeypointInteractionNet, reward: KINetReward) -> None:
+    A dim of stride 0 (e.g. the candidates of a planner that expanded one start state) holds the
+    same values all along; computing on one slice and broadcasting gives the same result.
+
+    Args:
+        tensors: Tensors with the same leading (batch) dims.
+        event_dims: Trailing dims of each tensor that are not batch dims.
+    """
+    for dim in range(tensors[0].dim() - event_dims):
+        if tensors[0].shape[dim] > 1 and all(tensor.stride(dim) == 0 for tensor in tensors):
+            tensors = tuple(tensor.narrow(dim, 0, 1) for tensor in tensors)
+    return tensors
+
+
+class _GraphStep(nn.Module):
+    """One imagined push with the interaction net; reward from the predicted next graph.
+
+    With ``fast``, a start graph shared by all candidates (stride 0, see
+    :func:`narrow_broadcast_dims`) is passed to the interaction net once, which then computes
+    what does not depend on the push once per plan step instead of once per candidate.
+    """
+
+    def __init__(
+        self, interaction: KeypointInteractionNet, reward: KINetReward, fast: bool
+    ) -> None:
         super().__init__()
         self.interaction = interaction
         self.reward = reward
+        self.fast = fast
 
     def forward(
         self, pos: Tensor, feat: Tensor, action: Tensor, goal_nodes: Tensor, goal_pos: Tensor
     ) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
-        prediction = self.interaction(pos, feat, action)
+        graph = narrow_broadcast_dims(pos, feat, event_dims=2) if self.fast else (pos, feat)
+        prediction = self.interaction(*graph, action, fast=self.fast)
         reward = self.reward(self.interaction, prediction, feat, goal_nodes, goal_pos)
         return prediction.next_pos, feat, reward.unsqueeze(-1), goal_nodes, goal_pos
+
+
+@dataclass(frozen=True, eq=False)
+class _GoalGraph:
+    """A goal image's keypoints ``[*G, K, 2]`` and node embeddings ``[*G, K, E]``, and what they
+    were computed from (the image and a ``(data_ptr, version)`` stamp of every model tensor)."""
+
+    pixels: Tensor
+    weights: tuple[tuple[int, int], ...]
+    pos: Tensor
+    nodes: Tensor
+
+    def matches(self, pixels: Tensor, weights: tuple[tuple[int, int], ...]) -> bool:
+        """Whether this is the graph of the goal image ``pixels`` under the model ``weights``."""
+        return (
+            self.weights == weights
+            and self.pixels.shape == pixels.shape
+            and torch.equal(self.pixels, pixels)
+        )
 
 
 class KINetModelEnv(StateModelEnv):
@@ -157,6 +202,13 @@ class KINetModelEnv(StateModelEnv):
     element can have its own. The env is not batch-locked and runs the model without gradient
     in eval mode (mean edge logits) when used by a planner.
 
+    Planning arithmetic (``fast``): :meth:`observe` embeds a goal image once (again when the image
+    or the model's weights change); a start state that all candidates share in memory (as
+    :class:`~kinet_rl.planners.GraphMPCPlanner` passes it) is encoded once per step, not once per
+    candidate; and the interaction net runs its fast edge layout
+    (:meth:`KeypointInteractionNet.forward`). The outputs are those of the straightforward
+    computation (``fast=False``) up to float rounding; ``bench/planner_flops.py`` compares both.
+
     Keys:
         State/observation: ``KP_POS`` ``[*B, K, 2]``, ``KP_FEAT`` ``[*B, K, D]``,
         ``GOAL_KP_NODE_EMB`` ``[*B, K, E]``, ``GOAL_KP_POS`` ``[*B, K, 2]``. Action ``[*B, 4]``
@@ -165,9 +217,13 @@ class KINetModelEnv(StateModelEnv):
     Args:
         model: A trained :class:`KINetWorldModel`.
         reward: The goal reward (default: the paper's ``S``).
+        fast: Plan with less arithmetic (see above); False runs the straightforward computation,
+            the reference the fast one is tested and benchmarked against.
     """
 
-    def __init__(self, model: KINetWorldModel, reward: KINetReward | None = None) -> None:
+    def __init__(
+        self, model: KINetWorldModel, reward: KINetReward | None = None, fast: bool = True
+    ) -> None:
         if reward is not None and not callable(reward):
             raise TypeError(
                 f"reward must be a KINetReward object, got {reward!r}; pass e.g. "
@@ -175,7 +231,7 @@ class KINetModelEnv(StateModelEnv):
             )
         self.reward = GraphSimilarityReward() if reward is None else reward
         step = TensorDictModule(
-            _GraphStep(model.interaction, self.reward),
+            _GraphStep(model.interaction, self.reward, fast),
             in_keys=[KP_POS, KP_FEAT, ACTION, GOAL_KP_NODE_EMB, GOAL_KP_POS],
             out_keys=[KP_POS, KP_FEAT, STEP_REWARD, GOAL_KP_NODE_EMB, GOAL_KP_POS],
         )
@@ -188,6 +244,8 @@ class KINetModelEnv(StateModelEnv):
             "('goal', 'pixels').",
         )
         self.model = model
+        self.fast = fast
+        self._goal: _GoalGraph | None = None
 
     @torch.no_grad()
     def observe(self, pixels: Tensor, goal_pixels: Tensor) -> TensorDict:
@@ -210,18 +268,43 @@ class KINetModelEnv(StateModelEnv):
                 f"{tuple(pixels.shape[-3:])} must have the same [H, W, 3]; resize the goal image."
             )
         batch = pixels.shape[:-3]
-        goal_pixels = goal_pixels.expand(*batch, *goal_pixels.shape[-3:])
+        try:
+            goal_fits = torch.broadcast_shapes(goal_pixels.shape[:-3], batch) == batch
+        except RuntimeError:
+            goal_fits = False
+        if not goal_fits:
+            raise ValueError(
+                f"goal images {tuple(goal_pixels.shape)} do not broadcast to the current images' "
+                f"batch {tuple(batch)}; pass one goal [H, W, 3] or one per image."
+            )
         was_training = self.model.training
         self.model.eval()
         pos, feat = self.model.detector(pixels)
-        goal_pos, goal_feat = self.model.detector(goal_pixels)
-        goal_nodes = self.model.interaction.embed_nodes(goal_pos, goal_feat)
+        goal = self._goal_graph(goal_pixels)
         self.model.train(was_training)
+        k = pos.shape[-2]
+        goal_nodes = goal.nodes.expand(*batch, k, goal.nodes.shape[-1]).clone()
+        goal_pos = goal.pos.expand(*batch, k, 2).clone()
         return TensorDict(
             {KP_POS: pos, KP_FEAT: feat, GOAL_KP_NODE_EMB: goal_nodes, GOAL_KP_POS: goal_pos},
             batch_size=batch,
             device=self.device,
         )
+
+    def _goal_graph(self, goal_pixels: Tensor) -> _GoalGraph:
+        """The goal's keypoints and embeddings; with ``fast``, kept while image and model stay."""
+        weights = tuple(
+            (tensor.data_ptr(), tensor._version)
+            for tensor in self.model.state_dict(keep_vars=True).values()
+        )
+        goal = self._goal
+        if goal is None or not goal.matches(goal_pixels, weights):
+            pos, feat = self.model.detector(goal_pixels)
+            nodes = self.model.interaction.embed_nodes(pos, feat)
+            goal = _GoalGraph(goal_pixels.clone(), weights, pos, nodes)
+            if self.fast:
+                self._goal = goal
+        return goal
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         if tensordict is not None and KP_POS not in tensordict.keys(True):

@@ -58,8 +58,10 @@ class GraphMPCPlanner(MPCPlannerBase):
     ICLR 2024 (MPPI update, warm start).
 
     Keys:
-        Reads the input tensordict (``[*B]``) as the env's start state. Writes ``action_key``
-        ``[*B, *A]``.
+        Reads the input tensordict (``[*B]``) as the env's start state; the env sees it as a
+        broadcast view ``[*B, N]`` (stride 0 over the candidates, so the env must not write its
+        entries in place), from which it may compute what does not depend on the action once
+        (``KINetModelEnv`` does). Writes ``action_key`` ``[*B, *A]``.
 
     Args:
         env: Model env with ``batch_locked=False`` and a continuous action spec.
@@ -150,12 +152,9 @@ class GraphMPCPlanner(MPCPlannerBase):
         batch_shape = tensordict.batch_size
         mean = self._initial_mean(tensordict)  # [*B, 1, T, *A]
         std = torch.full_like(mean, self.max_std)
-        start = (
-            tensordict.exclude("next")
-            .unsqueeze(-1)
-            .expand(*batch_shape, self.num_candidates)
-            .clone()
-        )  # [*B, N]
+        # [*B, N] views (stride 0 over N): a model env can tell that every candidate starts from
+        # the same state and compute what does not depend on the action once.
+        start = tensordict.exclude("next").unsqueeze(-1).expand(*batch_shape, self.num_candidates)
         n_event = 1 + len(self._action_shape)  # T and action dims
         dim = len(batch_shape)  # the candidate dim
         kept: Tensor | None = None  # [*B, keep, T, *A] elites carried over (iCEM)
