@@ -73,7 +73,7 @@ def test_tensorboard_run_shows_images_and_rearrangement_gif(smoke_run: Path) -> 
 
     run = smoke_run / "run_tb"
     tiny_eval = [
-        "report.rearrangement_episodes=1", "eval.num_steps=2", "eval.methods=[kinet_graph_distance]",
+        "report.rearrangement_episodes=1", "eval.num_steps=2", "eval.methods=[kinet_keypoints_l2]",
         "eval.workers=1", "eval.videos=1", "eval.planner.num_candidates=8", "eval.planner.top_k=2",
         "eval.planner.optim_steps=1",
     ]  # fmt: skip
@@ -89,9 +89,9 @@ def test_tensorboard_run_shows_images_and_rearrangement_gif(smoke_run: Path) -> 
     (final_keypoints,) = images["test/keypoints"]
     expected = (run / "images" / "keypoints_final.png").read_bytes()
     assert final_keypoints.encoded_image_string == expected and final_keypoints.step == 6
-    (video,) = images["rearrangement/rearrangement_seed10000"]
+    (video,) = images["rearrangement/rearrangement_seed50000"]
     assert video.encoded_image_string[:6] == b"GIF89a" and video.step == 6
-    gif = run / "rearrangement" / "rearrangement_seed10000.gif"
+    gif = run / "rearrangement" / "rearrangement_seed50000.gif"
     assert video.encoded_image_string == gif.read_bytes()
     assert "rearrangement/rearrangement" in images  # the distance-to-goal plot
 
