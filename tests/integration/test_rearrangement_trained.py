@@ -55,7 +55,9 @@ def test_trained_kinet_graph_mpc_plans_closer_to_the_goal_than_random_pushes(
         "report.horizons=[1]", "report.num_sequences=64",
     ]  # fmt: skip
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    result = subprocess.run(command, cwd=REPO, env=env, capture_output=True, text=True, timeout=1500)
+    result = subprocess.run(
+        command, cwd=REPO, env=env, capture_output=True, text=True, timeout=1500
+    )
     assert result.returncode == 0, result.stderr[-4000:]
     model = KINetWorldModel.from_checkpoint(tmp_path / "run" / "kinet.pt")
     eval_settings = {
