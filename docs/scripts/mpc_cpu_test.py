@@ -46,6 +46,7 @@ def main():
             ],
             "kinet",
         ),
+        ("kinet_l2", ["kinet_keypoints_l2"], "kinet"),  # only the chosen KINet planner (second budget)
         ("refs", ["random", "oracle"], None),
         ("in", ["model_mpc"], "in"),
         ("forw", ["model_mpc"], "forw"),
