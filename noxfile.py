@@ -33,9 +33,6 @@ TINY_EVAL = [
     "eval.planner.num_candidates=8",
     "eval.planner.top_k=2",
     "eval.planner.optim_steps=1",
-    "eval.oracle_planner.num_candidates=8",
-    "eval.oracle_planner.top_k=2",
-    "eval.oracle_planner.optim_steps=1",
 ]
 # Renders a current and a goal camera image of the smoke scene for `python -m kinet_rl.plan`.
 RENDER_IMAGES = """
