@@ -21,6 +21,7 @@ from kinet_rl.baselines import (
     ImageForwardInverseModel,
     ImageForwardModel,
     ObjectInteractionModel,
+    VCDNWorldModel,
     VisualInteractionModel,
 )
 from kinet_rl.configs import config_dir
@@ -36,8 +37,17 @@ TINY_KINET = {
     "num_hidden": 1,
     "num_rounds": 1,
 }
+#: Constructor settings of the tiny V-CDN of the baseline tests.
+TINY_VCDN = {
+    "num_keypoints": 4,
+    "channels": 8,
+    "embed_dim": 8,
+    "hidden_dim": 16,
+    "num_hidden": 1,
+    "num_rounds": 2,
+}
 #: Baseline names understood by the ``tiny_baseline`` fixture.
-BASELINES = ("forw", "forwinv", "in", "visin")
+BASELINES = ("forw", "forwinv", "in", "visin", "vcdn")
 
 
 @pytest.fixture(scope="session")
@@ -59,7 +69,8 @@ def tiny_kinet() -> Callable[..., KINetWorldModel]:
 
 @pytest.fixture
 def tiny_baseline() -> Callable[..., torch.nn.Module]:
-    """Builds a tiny, untrained baseline by name (``forw``, ``forwinv``, ``in``, ``visin``)."""
+    """Builds a tiny, untrained baseline by name (``forw``, ``forwinv``, ``in``, ``visin``,
+    ``vcdn``)."""
 
     def make(name: str, num_objects: int = 3, image_size: int = 32) -> torch.nn.Module:
         if name not in BASELINES:
@@ -69,6 +80,8 @@ def tiny_baseline() -> Callable[..., torch.nn.Module]:
         if name in ("forw", "forwinv"):
             model_class = ImageForwardModel if name == "forw" else ImageForwardInverseModel
             return model_class(feature_dim=8, channels=4, probe_hidden_dim=8, **small)
+        if name == "vcdn":
+            return VCDNWorldModel(**TINY_VCDN)
         if name == "in":
             return ObjectInteractionModel(
                 num_objects=num_objects, embed_dim=8, num_rounds=1, **small

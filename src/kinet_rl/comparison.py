@@ -5,8 +5,8 @@ same held-out test sequences for every model of a camera, averaged over the sequ
 training seed, then mean ± 95% interval (Student's t) over training seeds; the detector floor
 reads object motion off the keypoints KINet detects in the true next frames. The MPC table is the
 ground-truth mean object distance to the goal after ``T`` pushes (mean ± 95% interval over the
-same episodes) and the success rate with its Wilson interval; Table II is KINet's MPC final distance per object count and
-geometry.
+same episodes) and the success rate with its Wilson interval; Table II is the MPC final distance of
+the generalization models (KINet, KINet-determ, V-CDN) per object count and geometry.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ LABELS = {
     "forwinv": "ForwInv",
     "in": "IN (GT state)",
     "visin": "VisIN (GT state + image)",
+    "vcdn": "V-CDN",
     "random": METHODS["random"].label,
     "oracle": METHODS["oracle"].label,
 }
@@ -153,6 +154,8 @@ def _planner(row: str, kinet_method: str) -> str:
         return METHODS[kinet_method].label
     if row in ("forw", "forwinv"):
         return "MPC on goal-image feature distance"
+    if row == "vcdn":
+        return "MPC on goal-image keypoint distance"
     if row in ("in", "visin", "oracle"):
         return "MPC on GT goal distance"
     return "-"

@@ -1,13 +1,15 @@
-"""Rearrangement evaluation of a trained KINet: ``python -m kinet_rl.evaluate +exp=<name> checkpoint=<path>``.
+"""Rearrangement evaluation of a trained model: ``python -m kinet_rl.evaluate +exp=<name> checkpoint=<path>``.
 
 Runs KINet-GraphMPC (the paper's ``S`` and the embedding distance), MPC on keypoint positions
 only, random pushes and the oracle MPC on the experiment's scene, the generalization table (1-5
 objects x train/gen geometry) and extra backgrounds, with settings from the ``eval`` group
 (``conf/eval/rearrange.yaml``). Writes plots, GIFs, ``rearrangement.md`` and
 ``rearrangement.json`` to ``<run dir>/rearrangement``, the plots and GIFs also to the TorchRL
-logger of the ``logger`` group. Without ``checkpoint`` it uses ``<run dir>/kinet.pt`` (the
-training run of the same experiment); ``checkpoint=pretrained:<name>`` uses a model shipped with
-the package.
+logger of the ``logger`` group. The model is of the experiment's ``model`` group: a baseline's
+experiment names its methods (e.g. ``+exp=blocks_topview_vcdn`` plans with ``model_mpc``).
+Without ``checkpoint`` it uses the training run of the same experiment (``<run dir>/kinet.pt``,
+``model.pt`` for a baseline); ``checkpoint=pretrained:<name>`` uses a KINet shipped with the
+package.
 
 The paper's protocol (1,000 test episodes, T = 40, 3 blocks, top camera) with the shipped model:
 ``python -m kinet_rl.evaluate +exp=blocks_topview checkpoint=pretrained:blocks_topview
@@ -22,13 +24,14 @@ from typing import Any, cast
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
+from hydra.utils import get_class
 from omegaconf import DictConfig, OmegaConf
 
 from kinet_rl.configs import config_dir
 from kinet_rl.interrupts import exit_on_interrupt
-from kinet_rl.models import KINetWorldModel
+from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.models.pretrained import resolve_checkpoint
-from kinet_rl.pipeline import KINET_FILE, check_config, evaluate_rearrangement
+from kinet_rl.pipeline import check_config, evaluate_rearrangement, trained_model_file
 from kinet_rl.rearrangement import RearrangementSettings
 from kinet_rl.training.loggers import make_logger
 
@@ -50,13 +53,15 @@ def settings_from_config(cfg: DictConfig) -> RearrangementSettings:
 def evaluate(cfg: DictConfig, run_dir: Path) -> dict[str, Any]:
     """Loads the checkpoint and runs the full evaluation; returns its summary."""
     settings = settings_from_config(cfg)
-    checkpoint = resolve_checkpoint(cfg.get("checkpoint") or run_dir / KINET_FILE)
+    model_class = cast(type[ConfigCheckpointMixin], get_class(cfg.model._target_))
+    default = run_dir / trained_model_file(model_class)
+    checkpoint = resolve_checkpoint(cfg.get("checkpoint") or default)
     if not checkpoint.is_file():
         raise FileNotFoundError(
             f"No checkpoint at {checkpoint}; train first (python -m kinet_rl.train +exp=...) or "
-            "pass checkpoint=<path to kinet.pt> (or pretrained:<name>)."
+            f"pass checkpoint=<path to {default.name}> (or pretrained:<name>)."
         )
-    model = KINetWorldModel.from_checkpoint(checkpoint)
+    model: Any = model_class.from_checkpoint(checkpoint)
     logger.info("Evaluating %s on %s", checkpoint, settings.scene)
     logs = cast(dict[str, Any], OmegaConf.to_container(cfg.logger, resolve=True))
     run_logger = make_logger(logs["kind"], run_dir, cfg.exp_name, None, logs.get("wandb_kwargs"))

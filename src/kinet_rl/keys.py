@@ -26,6 +26,7 @@ FUTURE_PIXELS = ("future", PIXELS)  # uint8 [*B, H - 1, H, W, 3] the frames afte
 KP_POS = ("keypoints", "pos")  # float32 [*B, K, 2] image coordinates in [-1, 1]
 KP_FEAT = ("keypoints", "feat")  # float32 [*B, K, D]
 KP_NODE_EMB = ("keypoints", "node_emb")  # float32 [*B, K, E] scene-graph node embeddings
+KP_EDGE_TYPE = ("keypoints", "edge_type")  # float32 [*B, K, K - 1, C] edge-type probs (V-CDN)
 GOAL_PIXELS = ("goal", PIXELS)  # uint8 [*B, H, W, 3] goal image
 GOAL_KP_POS = ("goal", "keypoints", "pos")
 GOAL_KP_NODE_EMB = ("goal", "keypoints", "node_emb")  # float32 [*B, K, E] goal-graph nodes

@@ -384,9 +384,14 @@ def evaluate_rearrangement(
     }
 
 
+def trained_model_file(model_class: type) -> str:
+    """The file name of a trained model of ``model_class`` in its run directory."""
+    return KINET_FILE if issubclass(model_class, KINetWorldModel) else BASELINE_FILE
+
+
 def model_file(model: nn.Module) -> str:
     """The file name of a trained model in its run directory."""
-    return KINET_FILE if isinstance(model, KINetWorldModel) else BASELINE_FILE
+    return trained_model_file(type(model))
 
 
 def run_experiment(

@@ -62,13 +62,12 @@ from kinet_rl.interrupts import exit_on_interrupt
 from kinet_rl.models import KINetWorldModel
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.pipeline import (
-    BASELINE_FILE,
     DATASET_ENV_KEYS,
-    KINET_FILE,
     ExperimentSettings,
     check_config,
     evaluate_rearrangement,
     run_experiment,
+    trained_model_file,
 )
 from kinet_rl.planners.graph_mpc import CODE_ARGUMENTS, GraphMPCPlanner, check_planner_settings
 from kinet_rl.rearrangement import RearrangementSettings
@@ -85,6 +84,7 @@ EXPERIMENT_SUFFIX = {
     "forwinv": "_forwinv",
     "in": "_in",
     "visin": "_visin",
+    "vcdn": "_vcdn",
 }
 CAMERAS = ("top", "side")
 #: What a planner budget's name may be (it is part of file names, e.g. ``tables_mpc_64x3.json``).
@@ -213,8 +213,7 @@ def check_rows(tables: TablesSettings) -> None:
 def load_model(cfg: DictConfig, run_dir: Path) -> Any:
     """The trained model of a row: ``kinet.pt`` (KINet) or ``model.pt`` (baselines)."""
     model_class = cast(type[ConfigCheckpointMixin], get_class(cfg.model._target_))
-    name = KINET_FILE if issubclass(model_class, KINetWorldModel) else BASELINE_FILE
-    model: Any = model_class.from_checkpoint(run_dir / name)
+    model: Any = model_class.from_checkpoint(run_dir / trained_model_file(model_class))
     return model.cpu().eval()
 
 

@@ -1,5 +1,8 @@
 """Each baseline learns on synthetic pushes: its loss falls and it beats the no-motion baseline.
 
+V-CDN trains in two stages (perception, then dynamics on frozen keypoints), so each stage's loss
+is measured on its own, and its training report is written.
+
 Fixed seeds; data are :class:`~kinet_rl.baselines.ToyPushData` (32 px coloured squares, 3
 objects). Thresholds come from measured runs with margin (docs/baselines.md lists the numbers).
 """
@@ -16,9 +19,12 @@ from kinet_rl.baselines import (
     ObjectForwardLoss,
     ObjectInteractionModel,
     ToyPushData,
+    VCDNLoss,
+    VCDNWorldModel,
     VisualInteractionModel,
 )
 from kinet_rl.evaluation.forward import forward_errors
+from kinet_rl.evaluation.report import TrainingReport
 
 pytestmark = pytest.mark.slow
 
@@ -95,3 +101,36 @@ def test_baseline_learns_forward_prediction(name, data):
     ratio = errors["model"] / errors["no_motion"]
     print(f"{name}: loss {first:.3f} -> {last:.3f}; one-step error {errors}, ratio {ratio:.2f}")
     assert ratio < max_ratio, f"{name}: one-step error {errors} (ratio {ratio:.2f} >= {max_ratio})"
+
+
+def test_vcdn_learns_perception_then_forward_prediction(data, tmp_path):
+    """Measured (seeds 0, 1, 2): ``loss_rec`` fell 10.8x, 9.2x, 9.1x over the 400 perception
+    steps, ``loss_fwd`` 3.1x, 2.3x, 3.0x over the 800 dynamics steps, and the one-step error was
+    0.61, 0.70, 0.75 of no motion (seed 0 is asserted; ~25 s)."""
+    train, test = data
+    torch.manual_seed(0)
+    model = VCDNWorldModel(num_keypoints=4, channels=16, **OBJECT)
+    loss = VCDNLoss(model, total_steps=1200, perception_fraction=1 / 3).train()
+    optimiser = torch.optim.Adam(loss.parameters(), lr=2e-3)
+    generator = torch.Generator().manual_seed(0)
+    history: dict[str, list[float]] = {"loss_rec": [], "loss_fwd": []}
+    for _ in range(1200):
+        losses = loss(train.sample(32, generator))
+        optimiser.zero_grad(set_to_none=True)
+        sum(losses.values()).backward()
+        torch.nn.utils.clip_grad_norm_(loss.parameters(), 10.0)
+        optimiser.step()
+        for name, values in history.items():
+            if name in losses:
+                values.append(losses[name].item())
+    assert [len(v) for v in history.values()] == [400, 800]
+    drops = {name: sum(v[:20]) / sum(v[-20:]) for name, v in history.items()}
+    assert drops["loss_rec"] > 5 and drops["loss_fwd"] > 2, drops
+    report = TrainingReport(tmp_path, "toy_vcdn", model, test, test, test.geometry, (1,), 256)
+    results = report.final(step=1200)
+    ratio = results["forward_error_m"][1] / results["no_motion_error_m"][1]
+    print(f"vcdn: loss drops {drops}; one-step error ratio {ratio:.2f}")
+    assert ratio < 0.8, results["forward_errors_m"]
+    assert results["model"] == "V-CDN" and 0 < results["keypoint_accuracy"] <= 1
+    assert "V-CDN" in (tmp_path / "report.md").read_text()
+    assert (tmp_path / "images" / "reconstruction_final.png").is_file()

@@ -51,7 +51,7 @@ SMALL_KINET = [*SMALL, "model.num_keypoints=4", "model.embed_dim=16"]
 
 def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, conf_dir) -> None:
     torch.set_num_threads(1)
-    models = ["kinet", "kinet_determ", "kinet_no_ctr", "forw", "forwinv", "in", "visin"]
+    models = ["kinet", "kinet_determ", "kinet_no_ctr", "forw", "forwinv", "in", "visin", "vcdn"]
     with initialize_config_dir(str(conf_dir), version_base="1.3"):
         overrides = [
             "tables.forward_sequences=8",
@@ -76,7 +76,7 @@ def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, con
                               "16x2": {"num_candidates": 16, "optim_steps": 2, "top_k": 4}}  # fmt: skip
         tables.overrides = smoke_overrides(tmp_path)
         tables.model_overrides = {
-            m: SMALL_KINET if m.startswith("kinet") else SMALL for m in models
+            m: SMALL_KINET if m.startswith("kinet") or m == "vcdn" else SMALL for m in models
         }
         tables = TablesSettings.from_container(OmegaConf.to_container(tables, resolve=True))
         path = build_tables(tables, tmp_path)
@@ -86,7 +86,8 @@ def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, con
         assert build_tables(tables, tmp_path).read_text() == text
         assert (tmp_path / "blocks_topview_in" / "results.json").stat().st_mtime == mtime
     for label in ["KINet", "KINet-determ", "KINet-no-ctr", "Forw", "ForwInv", "IN (GT state)",
-                  "VisIN (GT state + image)", "No motion", "Random pushes", "Oracle MPC"]:  # fmt: skip
+                  "VisIN (GT state + image)", "V-CDN", "No motion", "Random pushes",
+                  "Oracle MPC"]:  # fmt: skip
         assert f"| {label}" in text, label
     assert "not run" not in text
     table_i = text.split("## Table I")[1].split("Objects that moved")[0]
@@ -105,7 +106,8 @@ def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, con
         rows = [line for line in mpc.splitlines() if line.startswith("| ") and "±" in line]
         assert len(rows) == len(models) + 2
     table_ii = text.split("## Table II")[1]
-    assert len([line for line in table_ii.splitlines() if line.count("±") == 4]) == 2
+    # KINet, KINet-determ and V-CDN (model_mpc at any object count) x 2 geometries, 2 counts
+    assert len([line for line in table_ii.splitlines() if line.count("±") == 6]) == 2
     numbers = [float(x) for x in re.findall(r"(-?\d+\.\d+) ± (\d+\.\d+)", text) for x in x]
     assert numbers and all(torch.isfinite(torch.tensor(numbers)))
     assert (tmp_path / "mpc_curves_8x1.png").stat().st_size > 0
@@ -125,7 +127,7 @@ def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, con
 
 
 @pytest.mark.parametrize(
-    ("name", "workers"), [("forw", 1), ("forwinv", 1), ("in", 1), ("visin", 2)]
+    ("name", "workers"), [("forw", 1), ("forwinv", 1), ("in", 1), ("visin", 2), ("vcdn", 2)]
 )
 def test_baseline_mpc_runs_through_the_shared_rearrangement_evaluation(
     name: str, workers: int, tmp_path: Path, tiny_baseline

@@ -11,9 +11,11 @@ from pathlib import Path
 
 import pytest
 import torch
+from hydra import compose, initialize_config_dir
 
+from kinet_rl import evaluate
 from kinet_rl.atomic import CheckpointError
-from kinet_rl.baselines import ObjectCountError, ObjectInteractionModel
+from kinet_rl.baselines import ObjectCountError, ObjectInteractionModel, VCDNWorldModel
 from kinet_rl.data import load_dataset
 from kinet_rl.envs import SceneGeometry, SceneSettings
 from kinet_rl.evaluation.forward import forward_errors
@@ -143,6 +145,32 @@ def test_baseline_trains_through_the_same_pipeline(smoke_run: Path) -> None:
     errors = forward_errors(model.object_rollout(), test, (1, 3), num_sequences=4)
     reproduced = {str(h): e["model"] for h, e in errors.items()}
     assert reproduced == pytest.approx(results["forward_error_m"], rel=1e-4)
+
+
+def test_vcdn_trains_through_the_same_pipeline_and_evaluate_plans_with_it(
+    smoke_run: Path, conf_dir: Path
+) -> None:
+    run = smoke_run / "run_vcdn"
+    run_train(smoke_run, "model=vcdn", "loss=vcdn", f"hydra.run.dir={run}")
+    results = json.loads((run / "results.json").read_text())
+    assert results["model"] == "V-CDN" and results["step"] == 6
+    assert 0.0 <= results["keypoint_accuracy"] <= 1.0
+    assert (run / "images" / "reconstruction_final.png").stat().st_size > 0
+    losses = {p.stem for p in (run / "logs").rglob("train/loss_*.csv")}
+    assert losses == {"loss_rec", "loss_fwd", "loss_kl", "loss_rollout"}  # both stages ran
+    VCDNWorldModel.from_checkpoint(run / "model.pt", {"num_keypoints": 6})
+    overrides = [
+        "+exp=smoke", "model=vcdn", "loss=vcdn", "eval.methods=[model_mpc,random]",
+        "eval.kinet_method=model_mpc", "eval.episodes=1", "eval.num_steps=2",
+        "eval.num_objects=[2]", "eval.geometries=[train]", "eval.backgrounds=[]",
+        "eval.workers=1", "eval.generalization_episodes=1", "eval.videos=0",
+        "eval.planner.num_candidates=8", "eval.planner.top_k=2", "eval.planner.optim_steps=1",
+    ]  # fmt: skip
+    with initialize_config_dir(str(conf_dir), version_base="1.3"):
+        cfg = compose("config", overrides=overrides)
+    summary = evaluate.evaluate(cfg, run)["summary"]  # loads <run>/model.pt
+    assert set(summary) == {"comparison", "n2_geom_train"}  # V-CDN plans any object count
+    assert set(summary["n2_geom_train"]) == {"model_mpc"}
 
 
 def test_kinet_takes_other_object_counts_and_in_refuses_them(smoke_run: Path) -> None:

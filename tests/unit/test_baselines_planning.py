@@ -9,9 +9,23 @@ import pytest
 import torch
 from torchrl.envs.utils import check_env_specs
 
-from kinet_rl.baselines.model_env import FeatureModelEnv, ObjectModelEnv, make_baseline_env
+from kinet_rl.baselines.model_env import (
+    FeatureModelEnv,
+    KeypointGraphModelEnv,
+    ObjectModelEnv,
+    make_baseline_env,
+)
 from kinet_rl.envs import SceneSettings
-from kinet_rl.keys import GOAL_IMAGE_FEAT, GOAL_OBJECT_POS, IMAGE_FEAT, OBJECT_FEAT, OBJECT_POS
+from kinet_rl.keys import (
+    GOAL_IMAGE_FEAT,
+    GOAL_KP_POS,
+    GOAL_OBJECT_POS,
+    IMAGE_FEAT,
+    KP_EDGE_TYPE,
+    KP_POS,
+    OBJECT_FEAT,
+    OBJECT_POS,
+)
 from kinet_rl.pipeline import evaluate_rearrangement
 from kinet_rl.planners import GraphMPCPlanner, StateModelEnv
 from kinet_rl.rearrangement.controllers import BaselineMPCController
@@ -40,15 +54,18 @@ def start_state(env, seed: int = 0):
     return env.observe(pixels, torch.from_numpy(goal["pixels"]))
 
 
-@pytest.mark.parametrize("name", ["forw", "forwinv", "in", "visin"])
+STATE_KEYS = {
+    ObjectModelEnv: [OBJECT_POS, OBJECT_FEAT, GOAL_OBJECT_POS],
+    FeatureModelEnv: [IMAGE_FEAT, GOAL_IMAGE_FEAT],
+    KeypointGraphModelEnv: [KP_POS, KP_EDGE_TYPE, GOAL_KP_POS],
+}
+
+
+@pytest.mark.parametrize("name", ["forw", "forwinv", "in", "visin", "vcdn"])
 def test_model_env_specs_and_state_keys(name: str, tiny_baseline) -> None:
     env = make_baseline_env(tiny_baseline(name))
     state = start_state(env)
-    keys = (
-        [OBJECT_POS, OBJECT_FEAT, GOAL_OBJECT_POS]
-        if isinstance(env, ObjectModelEnv)
-        else [IMAGE_FEAT, GOAL_IMAGE_FEAT]
-    )
+    keys = STATE_KEYS[type(env)]
     assert set(keys) == set(env.state_spec.keys(True, True))
     assert env.state_spec.is_in(state)
     assert not env.batch_locked and isinstance(env, StateModelEnv)
@@ -100,7 +117,7 @@ def test_in_env_planning_improves_the_goal_reward_over_random_actions(tiny_basel
     assert env.step(single)["next", "reward"].item() > random_reward.item()
 
 
-@pytest.mark.parametrize("name", ["forw", "forwinv", "in", "visin"])
+@pytest.mark.parametrize("name", ["forw", "forwinv", "in", "visin", "vcdn"])
 def test_controller_acts_in_bounds_through_the_method_registry(name: str, tiny_baseline) -> None:
     settings = RearrangementSettings(methods=("model_mpc",), planner=PLANNER)
     context = MethodContext(tiny_baseline(name), SceneSettings(image_size=SIZE), settings, 0)

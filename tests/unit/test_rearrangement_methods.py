@@ -28,6 +28,20 @@ def test_bad_methods_are_reported() -> None:
         check_methods(RearrangementSettings(kinet_method="oracle"))
 
 
+def test_a_baseline_of_any_object_count_plans_the_generalization_cells(tiny_baseline) -> None:
+    settings = RearrangementSettings(
+        methods=("model_mpc",),
+        kinet_method="model_mpc",
+        num_objects=(1, 5),
+        backgrounds=("random",),
+    )
+    check_methods(settings)
+    conditions = settings.conditions()
+    assert {c.role for c in conditions} == {"comparison", "generalization", "background"}
+    assert all("model_mpc" in c.methods for c in conditions)
+    check_model(conditions, tiny_baseline("vcdn"))
+
+
 def test_models_that_cannot_plan_a_method_are_reported(tiny_kinet) -> None:
     conditions = RearrangementSettings(methods=("random", "oracle")).conditions()
     check_model(conditions, None)  # no method needs a model

@@ -1,5 +1,5 @@
-"""Baselines of the KINet paper: Forw, ForwInv, IN and VisIN (Table I), their model envs, and
-the oracle's analytic push model on ground-truth state.
+"""Baselines of the KINet paper: Forw, ForwInv, IN, VisIN (Table I) and V-CDN, their model envs,
+and the oracle's analytic push model on ground-truth state.
 
 Each model is an ``nn.Module`` with a TorchRL loss, ``object_rollout(geometry)`` for
 forward-prediction evaluation and ``save_checkpoint``/``from_checkpoint``. See ``docs/baselines.md``.
@@ -14,8 +14,18 @@ from kinet_rl.baselines.image_models import (
     ImageForwardModel,
     MotionProbe,
 )
-from kinet_rl.baselines.losses import ImageForwardLoss, ObjectForwardLoss, feature_info_nce
-from kinet_rl.baselines.model_env import FeatureModelEnv, ObjectModelEnv, make_baseline_env
+from kinet_rl.baselines.losses import (
+    ImageForwardLoss,
+    ObjectForwardLoss,
+    VCDNLoss,
+    feature_info_nce,
+)
+from kinet_rl.baselines.model_env import (
+    FeatureModelEnv,
+    KeypointGraphModelEnv,
+    ObjectModelEnv,
+    make_baseline_env,
+)
 from kinet_rl.baselines.object_models import (
     ObjectCountError,
     ObjectInteractionModel,
@@ -24,17 +34,21 @@ from kinet_rl.baselines.object_models import (
 )
 from kinet_rl.baselines.oracle import AnalyticPushModelEnv, analytic_push
 from kinet_rl.baselines.toy_pushing import ToyPushData
+from kinet_rl.baselines.vcdn import EdgeTypeDynamics, EdgeTypeInference, VCDNWorldModel
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 
 __all__ = [
     "AnalyticPushModelEnv",
     "ConfigCheckpointMixin",
     "ConvEncoder",
+    "EdgeTypeDynamics",
+    "EdgeTypeInference",
     "FeatureModelEnv",
     "FeatureObjectRollout",
     "ImageForwardInverseModel",
     "ImageForwardLoss",
     "ImageForwardModel",
+    "KeypointGraphModelEnv",
     "MotionProbe",
     "ObjectCountError",
     "ObjectForwardLoss",
@@ -42,6 +56,8 @@ __all__ = [
     "ObjectModelEnv",
     "ObjectStateRollout",
     "ToyPushData",
+    "VCDNLoss",
+    "VCDNWorldModel",
     "VisualInteractionModel",
     "analytic_push",
     "crop_objects",

@@ -6,6 +6,7 @@ Reference: KINet, Rezazadeh et al., RA-L 2023, Sec. 4 (Baselines).
 from __future__ import annotations
 
 import torch
+import torch.distributed as dist
 import torch.nn.functional as F
 from tensordict import TensorDict, TensorDictBase
 from torch import Tensor
@@ -13,8 +14,18 @@ from torchrl.objectives import LossModule
 
 from kinet_rl.baselines.image_models import ImageForwardInverseModel, ImageForwardModel
 from kinet_rl.baselines.object_models import ObjectInteractionModel
-from kinet_rl.keys import ACTION, NEXT_OBJECT_POS, NEXT_PIXELS, OBJECT_POS, PIXELS
-from kinet_rl.models.losses import check_loss_weights
+from kinet_rl.baselines.vcdn import VCDNWorldModel
+from kinet_rl.keys import (
+    ACTION,
+    FUTURE_ACTION,
+    FUTURE_PIXELS,
+    NEXT_OBJECT_POS,
+    NEXT_PIXELS,
+    OBJECT_POS,
+    PIXELS,
+    PIXELS_0,
+)
+from kinet_rl.models.losses import check_loss_weights, keypoint_error
 
 
 def _require(tensordict: TensorDictBase, keys: list, what: str) -> list[Tensor]:
@@ -145,3 +156,112 @@ class ObjectForwardLoss(LossModule):
         predicted = model.predict(pos, model.node_features(tensordict), action)
         error = ((predicted - next_pos) / model.position_scale).pow(2).sum(dim=(-2, -1)).mean()
         return TensorDict({"loss_fwd": self.fwd_weight * error}, batch_size=[])
+
+
+class VCDNLoss(LossModule):
+    """Losses of V-CDN, in two stages over the run's ``total_steps`` optimiser steps.
+
+    Perception stage, the first ``round(perception_fraction * total_steps)`` training calls:
+    ``loss_rec``, the error of rebuilding ``I_t`` from ``I_0`` through the keypoints (KINet's
+    ``loss_rec``); only detector and reconstructor learn. Dynamics stage, the rest: the detector
+    is frozen (keypoints are detected without gradient) and inference and dynamics learn from
+    ``loss_fwd``, the mean over the batch of ``sum_k |x_hat_t+1 - x_t+1|^2`` against the detected
+    next keypoints, ``loss_kl``, the edge-type posterior's KL to the uniform prior, and (with
+    ``rollout_weight > 0``) ``loss_rollout``, the same error over an open-loop rollout of the
+    pushes after each transition on the graph inferred at ``x_t``. Each entry is already weighted.
+
+    The stage is counted by the buffer ``step`` (calls in training mode); it is saved with the
+    loss's state, so a resumed run continues where it stopped. Data-parallel training is refused:
+    the stages train different parameters, which DistributedDataParallel's static graph forbids.
+
+    Keys:
+        Reads a ``[B]`` batch with ``PIXELS_0`` and ``PIXELS`` (perception), ``PIXELS``,
+        ``("next", PIXELS)`` ``[B, H, W, 3]`` and ``ACTION`` ``[B, 4]`` (dynamics) and, for the
+        rollout, ``FUTURE_PIXELS`` ``[B, H - 1, ...]`` and ``FUTURE_ACTION``. Returns
+        ``loss_rec`` (perception) or ``loss_fwd``, ``loss_kl`` and ``loss_rollout`` (dynamics).
+
+    Reference: Li et al., NeurIPS 2020 (perception trained first, then inference and dynamics).
+
+    Args:
+        world_model: The :class:`VCDNWorldModel` being trained.
+        total_steps: Optimiser steps of the run (``trainer.steps``).
+        perception_fraction: Share of ``total_steps`` that trains perception.
+        rec_weight: Weight of ``loss_rec``.
+        fwd_weight: Weight of ``loss_fwd``.
+        kl_weight: Weight of ``loss_kl``.
+        rollout_weight: Weight of ``loss_rollout`` (0: off; needs ``trainer.horizon > 1``).
+    """
+
+    step: Tensor
+
+    def __init__(
+        self,
+        world_model: VCDNWorldModel,
+        total_steps: int,
+        perception_fraction: float = 0.5,
+        rec_weight: float = 1.0,
+        fwd_weight: float = 1.0,
+        kl_weight: float = 0.01,
+        rollout_weight: float = 0.0,
+    ) -> None:
+        super().__init__()
+        check_loss_weights(
+            rec_weight=rec_weight,
+            fwd_weight=fwd_weight,
+            kl_weight=kl_weight,
+            rollout_weight=rollout_weight,
+        )
+        self.perception_steps = round(perception_fraction * total_steps)
+        if not 0 < self.perception_steps < total_steps:
+            raise ValueError(
+                f"perception_fraction={perception_fraction} of total_steps={total_steps} gives "
+                f"{self.perception_steps} perception steps; both stages need at least one step: "
+                "choose a fraction in (0, 1) and trainer.steps >= 2."
+            )
+        if dist.is_available() and dist.is_initialized() and dist.get_world_size() > 1:
+            raise ValueError(
+                "V-CDN trains perception and dynamics in separate stages, which data-parallel "
+                "training does not support; train it in one process (no torchrun)."
+            )
+        self.world_model = world_model
+        self.rec_weight = rec_weight
+        self.fwd_weight = fwd_weight
+        self.kl_weight = kl_weight
+        self.rollout_weight = rollout_weight
+        self.register_buffer("step", torch.zeros((), dtype=torch.long))
+
+    @property
+    def training_perception(self) -> bool:
+        """Whether the next training call is in the perception stage."""
+        return int(self.step) < self.perception_steps
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDict:
+        """Computes the weighted losses of the current stage (see class docstring)."""
+        perception = self.training_perception
+        if self.training:
+            self.step += 1
+        model = self.world_model
+        if perception:
+            first, current = _require(tensordict, [PIXELS_0, PIXELS], "V-CDN perception")
+            loss_rec = self.rec_weight * model.reconstruction_error(first, current)
+            return TensorDict({"loss_rec": loss_rec}, batch_size=[])
+        current, following, action = _require(
+            tensordict, [PIXELS, NEXT_PIXELS, ACTION], "V-CDN dynamics"
+        )
+        with torch.no_grad():  # the frozen perception module
+            pos, next_pos = model.keypoints(torch.stack([current, following], dim=1)).unbind(1)
+        edge_types, kl = model.inference(pos)
+        predicted = model.dynamics(pos, edge_types, action)
+        losses = {
+            "loss_fwd": self.fwd_weight * keypoint_error(predicted, next_pos),
+            "loss_kl": self.kl_weight * kl.mean(),
+        }
+        if self.rollout_weight > 0:
+            frames, actions = _require(
+                tensordict, [FUTURE_PIXELS, FUTURE_ACTION], "V-CDN rollout (trainer.horizon > 1)"
+            )
+            with torch.no_grad():
+                target = model.keypoints(frames)  # [B, H - 1, K, 2]
+            rollout = model.roll(predicted, edge_types, actions)
+            losses["loss_rollout"] = self.rollout_weight * keypoint_error(rollout, target)
+        return TensorDict(losses, batch_size=[])

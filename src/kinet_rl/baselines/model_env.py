@@ -7,6 +7,9 @@
   (metres) of the predicted object positions to the ground-truth goal positions.
 * Forw / ForwInv (:class:`FeatureModelEnv`): state = the whole-image feature ``z``; reward =
   ``-|z_hat - z_goal|^2`` with ``z_goal`` the feature of the goal image.
+* V-CDN (:class:`KeypointGraphModelEnv`): state = the detected keypoints and the graph inferred
+  from them (carried over while imagining); reward = minus the mean distance of the predicted
+  keypoints to the goal image's keypoints (index-matched, image units).
 
 Both share :class:`~kinet_rl.planners.StateModelEnv` with the oracle's and KINet's model envs;
 the rearrangement evaluation plans over them with :class:`~kinet_rl.planners.GraphMPCPlanner`
@@ -15,6 +18,8 @@ the rearrangement evaluation plans over them with :class:`~kinet_rl.planners.Gra
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
 from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
@@ -22,30 +27,38 @@ from torch import Tensor, nn
 
 from kinet_rl.baselines.image_models import ImageForwardModel
 from kinet_rl.baselines.object_models import ObjectInteractionModel
+from kinet_rl.baselines.vcdn import VCDNWorldModel
 from kinet_rl.keys import (
     ACTION,
     GOAL_IMAGE_FEAT,
+    GOAL_KP_POS,
     GOAL_OBJECT_POS,
     IMAGE_FEAT,
+    KP_EDGE_TYPE,
+    KP_POS,
     OBJECT_FEAT,
     OBJECT_POS,
     PIXELS,
     STEP_REWARD,
 )
-from kinet_rl.planners.model_env import StateModelEnv
+from kinet_rl.planners.model_env import StateModelEnv, check_goal_image
 
 
-class _ObjectStep(nn.Module):
-    def __init__(self, model: ObjectInteractionModel) -> None:
+class _PositionStep(nn.Module):
+    """One imagined push of positions with a carried context (IN/VisIN's crop features, V-CDN's
+    graph); reward: minus the mean distance of the predicted positions to the goal's."""
+
+    def __init__(self, model: nn.Module, predict: Callable[[Tensor, Tensor, Tensor], Tensor]):
         super().__init__()
-        self.model = model
+        self.model = model  # holds the parameters that ``predict`` uses
+        self.predict = predict
 
     def forward(
-        self, pos: Tensor, feat: Tensor, action: Tensor, goal: Tensor
+        self, pos: Tensor, context: Tensor, action: Tensor, goal: Tensor
     ) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-        nxt = self.model.predict(pos, feat, action)
-        reward = -(nxt - goal).norm(dim=-1).mean(-1, keepdim=True)  # [*B, 1] mean metres
-        return nxt, feat, reward, goal
+        nxt = self.predict(pos, context, action)
+        reward = -(nxt - goal).norm(dim=-1).mean(-1, keepdim=True)  # [*B, 1]
+        return nxt, context, reward, goal
 
 
 class _FeatureStep(nn.Module):
@@ -74,7 +87,7 @@ class ObjectModelEnv(StateModelEnv):
 
     def __init__(self, model: ObjectInteractionModel) -> None:
         step = TensorDictModule(
-            _ObjectStep(model),
+            _PositionStep(model, model.predict),
             in_keys=[OBJECT_POS, OBJECT_FEAT, ACTION, GOAL_OBJECT_POS],
             out_keys=[OBJECT_POS, OBJECT_FEAT, STEP_REWARD, GOAL_OBJECT_POS],
         )
@@ -134,11 +147,7 @@ class FeatureModelEnv(StateModelEnv):
     @torch.no_grad()
     def observe(self, pixels: Tensor, goal_pixels: Tensor) -> TensorDict:
         """The start state: features of ``pixels`` ``[*B, H, W, 3]`` and of the goal image."""
-        if goal_pixels.shape[-3:] != pixels.shape[-3:]:
-            raise ValueError(
-                f"goal image {tuple(goal_pixels.shape[-3:])} and current image "
-                f"{tuple(pixels.shape[-3:])} must have the same [H, W, 3]; resize the goal image."
-            )
+        check_goal_image(pixels, goal_pixels)
         self.model.eval()
         feat = self.model.encode(pixels.to(self.device))
         goal = self.model.encode(goal_pixels.to(self.device)).expand_as(feat)
@@ -149,13 +158,58 @@ class FeatureModelEnv(StateModelEnv):
         )
 
 
-def make_baseline_env(model: nn.Module) -> ObjectModelEnv | FeatureModelEnv:
-    """The model env of a baseline: :class:`ObjectModelEnv` (IN/VisIN) or :class:`FeatureModelEnv`."""
+class KeypointGraphModelEnv(StateModelEnv):
+    """Imagined pushes with V-CDN on the keypoints of the current image and their inferred graph.
+
+    Keys:
+        State/observation: ``KP_POS`` ``[*B, K, 2]``, ``KP_EDGE_TYPE`` ``[*B, K, K - 1, C]``
+        (inferred from the current image's keypoints, carried over) and ``GOAL_KP_POS``
+        ``[*B, K, 2]`` (the goal image's keypoints). Action ``[*B, 4]`` in ``[-1, 1]``. Reward
+        ``[*B, 1]``: minus the mean over keypoints of ``|x_hat_k - g_k|`` (image units), keypoint
+        ``k`` against the goal's keypoint ``k`` (the detector's channels are consistent).
+
+    Args:
+        model: A (trained) :class:`VCDNWorldModel`.
+    """
+
+    def __init__(self, model: VCDNWorldModel) -> None:
+        step = TensorDictModule(
+            _PositionStep(model, model.dynamics),
+            in_keys=[KP_POS, KP_EDGE_TYPE, ACTION, GOAL_KP_POS],
+            out_keys=[KP_POS, KP_EDGE_TYPE, STEP_REWARD, GOAL_KP_POS],
+        )
+        k, c = model.config["num_keypoints"], model.config["num_edge_types"]
+        shapes = {KP_POS: (k, 2), KP_EDGE_TYPE: (k, k - 1, c), GOAL_KP_POS: (k, 2)}
+        super().__init__(step, shapes)
+        self.model = model
+
+    @torch.no_grad()
+    def observe(self, pixels: Tensor, goal_pixels: Tensor) -> TensorDict:
+        """The start state: keypoints and graph of ``pixels`` ``[*B, H, W, 3]``, goal keypoints."""
+        check_goal_image(pixels, goal_pixels)
+        self.model.eval()
+        pos = self.model.keypoints(pixels.to(self.device))
+        edge_types, _ = self.model.inference(pos)
+        goal = self.model.keypoints(goal_pixels.to(self.device)).expand_as(pos)
+        return TensorDict(
+            {KP_POS: pos, KP_EDGE_TYPE: edge_types, GOAL_KP_POS: goal},
+            batch_size=pos.shape[:-2],
+            device=self.device,
+        )
+
+
+def make_baseline_env(
+    model: nn.Module,
+) -> ObjectModelEnv | FeatureModelEnv | KeypointGraphModelEnv:
+    """The model env of a baseline: :class:`ObjectModelEnv` (IN/VisIN), :class:`FeatureModelEnv`
+    (Forw/ForwInv) or :class:`KeypointGraphModelEnv` (V-CDN)."""
     if isinstance(model, ObjectInteractionModel):
         return ObjectModelEnv(model)
     if isinstance(model, ImageForwardModel):
         return FeatureModelEnv(model)
+    if isinstance(model, VCDNWorldModel):
+        return KeypointGraphModelEnv(model)
     raise TypeError(
-        f"No baseline model env for {type(model).__name__}; model_mpc plans with IN, VisIN, Forw "
-        "or ForwInv (use the kinet_graph / kinet_keypoints methods for KINet)."
+        f"No baseline model env for {type(model).__name__}; model_mpc plans with IN, VisIN, Forw, "
+        "ForwInv or V-CDN (use the kinet_graph / kinet_keypoints methods for KINet)."
     )

@@ -18,7 +18,6 @@ from kinet_rl.devices import model_device
 from kinet_rl.envs.geometry import SceneGeometry, normalised_to_pixels
 from kinet_rl.evaluation.metrics import keypoint_hit_rate
 from kinet_rl.keys import ACTION, OBJECT_POS, PIXELS, PIXELS_0
-from kinet_rl.models.object_rollout import rollout_keypoints
 
 
 @torch.no_grad()
@@ -146,7 +145,7 @@ def image_prediction_errors(
     """Mean squared error (pixels in [0, 1]) of ``f_rec(I_0, x_0, x_hat_h)`` against the true frame."""
     generator = torch.Generator().manual_seed(seed)
     seq = dataset.sample_sequences(num_sequences, max(horizons), generator).to(model_device(model))
-    kp = rollout_keypoints(model, seq[PIXELS][:, 0], seq[ACTION])
+    kp = model.rollout_keypoints(seq[PIXELS][:, 0], seq[ACTION])
     truth = seq[PIXELS].float() / 255.0
     return {
         h: (model.predict_pixels(seq[PIXELS_0], kp[:, h]) - truth[:, h]).pow(2).mean().item()

@@ -23,6 +23,7 @@ from kinet_rl.evaluation.forward import (
 )
 from kinet_rl.evaluation.images import draw_keypoints, image_grid, save_png, upscale
 from kinet_rl.keys import ACTION, NEXT_PIXELS, PIXELS, PIXELS_0
+from kinet_rl.models.keypoint_model import KeypointWorldModel
 from kinet_rl.training.loggers import log_media
 
 log = logging.getLogger(__name__)
@@ -84,7 +85,7 @@ def summary_images(model, dataset, geometry: SceneGeometry, seed: int = 0) -> di
     )
     pos = observed.pos
     rebuilt = (model.reconstructor(source, observed) + 0.5).clamp(0.0, 1.0)
-    next_pos = model.interaction(pos, observed.feat, batch[ACTION]).next_pos
+    next_pos = model.rollout_keypoints(batch[PIXELS], batch[ACTION].unsqueeze(1))[:, 1]
     predicted = model.predict_pixels(batch[PIXELS_0], next_pos)
     kp_px = normalised_to_pixels(pos, geometry.image_size)
     batch, kp_px, rebuilt, predicted = batch.cpu(), kp_px.cpu(), rebuilt.cpu(), predicted.cpu()
@@ -110,7 +111,7 @@ def write_summaries(
 
 @dataclass
 class TrainingReport:
-    """Periodic and final evaluation of a KINet training run.
+    """Periodic and final evaluation of a training run (KINet or a baseline).
 
     Args:
         run_dir: The run directory (images and ``report.md`` go there).
@@ -137,12 +138,13 @@ class TrainingReport:
 
     @property
     def has_keypoints(self) -> bool:
-        """Whether the model is a keypoint model (KINet); baselines get forward errors only."""
-        return hasattr(self.model, "detector") and hasattr(self.model, "reconstructor")
+        """Whether the model is a keypoint model (KINet, V-CDN); other baselines get forward
+        errors only."""
+        return isinstance(self.model, KeypointWorldModel)
 
     @property
     def model_name(self) -> str:
-        return "KINet" if self.has_keypoints else type(self.model).__name__
+        return self.model.label if self.has_keypoints else type(self.model).__name__
 
     def accuracy(self, dataset) -> float:
         return keypoint_accuracy(
@@ -151,7 +153,7 @@ class TrainingReport:
 
     def on_validate(self, step: int) -> dict[str, float]:
         """The 1-push forward error (mm) on validation sequences (the learning curve), and for
-        KINet the keypoint accuracy and image summaries of the step."""
+        keypoint models the keypoint accuracy and image summaries of the step."""
         rollout = self.model.object_rollout(self.geometry)
         errors = forward_errors(rollout, self.val, (1,), VALIDATION_SEQUENCES)[1]
         scores = {"val/forward_error_1_mm": 1e3 * errors["model"]}

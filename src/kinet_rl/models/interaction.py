@@ -186,6 +186,52 @@ def edge_layout(num_nodes: int, fast: bool, device: torch.device) -> EdgeLayout:
     return EdgeLayout(fast, senders, senders * k + receivers, reverse, mask)
 
 
+#: Size of :func:`push_features`: the push and its two points relative to a node.
+PUSH_FEATURE_DIM = 2 * ACTION_DIM
+
+
+def push_batch(pos: Tensor, action: Tensor) -> torch.Size:
+    """The broadcast batch dims of graphs ``pos`` ``[*B, K, 2]`` and pushes ``action`` ``[*B, 4]``.
+
+    Raises:
+        ValueError: The action is not 4-d or the leading dims do not broadcast.
+    """
+    try:
+        batch = torch.broadcast_shapes(pos.shape[:-2], action.shape[:-1])
+    except RuntimeError:
+        batch = None
+    if action.shape[-1] != ACTION_DIM or batch is None:
+        raise ValueError(
+            f"Expected action [*B, {ACTION_DIM}] matching pos [*B, K, 2]; got "
+            f"{tuple(action.shape)} and {tuple(pos.shape)}."
+        )
+    return batch
+
+
+def push_features(
+    pos: Tensor, action: Tensor, batch: torch.Size, to_image: nn.Module | None = None
+) -> Tensor:
+    """Each node's push input ``a_k = [u, s - x_k, e - x_k]``: ``[*B, K, PUSH_FEATURE_DIM]``.
+
+    ``s`` and ``e`` are the push's start and end points (mapped by ``to_image`` if given), so
+    the input says where the push passes relative to the node, whatever the node's position.
+
+    Args:
+        pos: ``[*B, K, 2]`` node positions.
+        action: ``[*B, 4]`` push ``(start x, start y, end x, end y)``.
+        batch: The broadcast of ``pos``'s and ``action``'s leading dims.
+        to_image: Optional map of the push's points into the nodes' frame.
+    """
+    points = action.reshape(*action.shape[:-1], 1, 2, 2)  # [*B, 1, 2 points, 2]
+    if to_image is not None:
+        points = to_image(points)
+    relative = (points - pos.unsqueeze(-2)).flatten(-2)  # [*B, K, 4]
+    k = pos.shape[-2]
+    return torch.cat(
+        [action.unsqueeze(-2).expand(*batch, k, ACTION_DIM), relative.expand(*batch, k, -1)], -1
+    )
+
+
 def graph_similarity(nodes_a: Tensor, nodes_b: Tensor) -> Tensor:
     """Graph matching score ``S(G1, G2) = sum_k n1_k . n2_k``.
 
@@ -290,7 +336,7 @@ class KeypointInteractionNet(nn.Module):
             None if deterministic else mlp(2 * embed_dim, 2, hidden_dim, num_hidden)
         )
         self.edge_update = mlp(3 * embed_dim, embed_dim, hidden_dim, num_hidden)
-        self.node_update = mlp(2 * embed_dim + 2 * ACTION_DIM, embed_dim, hidden_dim, num_hidden)
+        self.node_update = mlp(2 * embed_dim + PUSH_FEATURE_DIM, embed_dim, hidden_dim, num_hidden)
         self.state_decoder = mlp(embed_dim, 2, hidden_dim, num_hidden)
 
     def embed_nodes(self, pos: Tensor, feat: Tensor) -> Tensor:
@@ -355,29 +401,13 @@ class KeypointInteractionNet(nn.Module):
         Returns:
             :class:`GraphPrediction` with the broadcast batch dims.
         """
-        try:
-            batch = torch.broadcast_shapes(pos.shape[:-2], action.shape[:-1])
-        except RuntimeError:
-            batch = None
-        if action.shape[-1] != ACTION_DIM or batch is None:
-            raise ValueError(
-                f"Expected action [*B, {ACTION_DIM}] matching pos [*B, K, 2]; got "
-                f"{tuple(action.shape)} and {tuple(pos.shape)}."
-            )
+        batch = push_batch(pos, action)
         k = pos.shape[-2]
         layout = edge_layout(k, fast, pos.device)
         nodes = self.embed_nodes(pos, feat)
         edges = self.edge_encoder(layout.pairs_of(edge_geometry(pos)))
         prob, kl = self._edge_prob(nodes, layout, batch)
-        # [*B, K, 2, 2]: push start and end relative to each keypoint
-        points = action.reshape(*action.shape[:-1], 1, 2, 2)
-        if self.action_to_image is not None:
-            points = self.action_to_image(points)
-        action_rel = (points - pos.unsqueeze(-2)).flatten(-2)
-        action_in = torch.cat(
-            [action.unsqueeze(-2).expand(*batch, k, ACTION_DIM), action_rel.expand(*batch, k, -1)],
-            -1,
-        )
+        action_in = push_features(pos, action, batch, self.action_to_image)
         hidden = nodes
         for _ in range(self.num_rounds):
             edges = layout.pair_mlp(self.edge_update, hidden, edges)

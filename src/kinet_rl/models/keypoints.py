@@ -129,6 +129,9 @@ class KeypointDetector(nn.Module):
     heatmap-weighted average of the 1/4 features, projected to ``feat_dim``, gives ``phi_k``.
     The same weights encode the initial frame ``I_0`` and the current frame ``I_t``.
 
+    With ``feat_dim = 0`` there is no feature head and ``phi_k`` is empty (``[N, K, 0]``): a
+    detector of keypoint positions only, as V-CDN's perception module.
+
     Gradients that reach ``phi_k`` (from the forward and contrastive losses) never move the
     keypoints: the pooling weights are detached, and with ``feature_grad="head"`` so are the
     pooled features, so that only the projection learns; ``"encoder"`` lets them train the
@@ -139,7 +142,7 @@ class KeypointDetector(nn.Module):
 
     Args:
         num_keypoints: ``K``.
-        feat_dim: ``D``, size of each keypoint's visual feature.
+        feat_dim: ``D``, size of each keypoint's visual feature (0: none).
         channels: ``C``, width of the 1/4-resolution features (the 1/2 level has ``C/2``).
         feature_grad: ``"head"`` or ``"encoder"``: how far feature gradients reach (see above).
     """
@@ -152,11 +155,12 @@ class KeypointDetector(nn.Module):
         feature_grad: str = "head",
     ) -> None:
         super().__init__()
-        if num_keypoints < 1 or feat_dim < 1 or channels < 1:
+        if num_keypoints < 1 or channels < 1:
             raise ValueError(
-                "num_keypoints, feat_dim and channels must be positive, got "
-                f"{num_keypoints}, {feat_dim} and {channels}."
+                f"num_keypoints and channels must be positive, got {num_keypoints} and {channels}."
             )
+        if feat_dim < 0:
+            raise ValueError(f"feat_dim must be >= 0 (0: no features), got {feat_dim}.")
         if feature_grad not in FEATURE_GRADS:
             raise ValueError(f"feature_grad={feature_grad!r}; choose one of {FEATURE_GRADS}.")
         self.feature_grad = feature_grad
@@ -169,7 +173,7 @@ class KeypointDetector(nn.Module):
             _conv_block(fine_ch, channels, 2), _conv_block(channels, channels)
         )
         self.heatmap_head = nn.Conv2d(channels, num_keypoints, 1)
-        self.feat_head = nn.Linear(channels, feat_dim)
+        self.feat_head = nn.Linear(channels, feat_dim) if feat_dim > 0 else None
 
     def encode(self, pixels: Tensor) -> EncodedFrames:
         """Encodes ``[*B, H, W, 3]`` images (``H``, ``W`` divisible by 4); outputs are flat ``[N]``."""
@@ -180,6 +184,9 @@ class KeypointDetector(nn.Module):
         fine = self.fine_net(images)
         coarse = self.coarse_net(fine)
         pos, heat = spatial_soft_argmax(self.heatmap_head(coarse))
+        if self.feat_head is None:
+            no_feat = pos.new_zeros(*pos.shape[:-1], 0)
+            return EncodedFrames(pos=pos, feat=no_feat, fine=fine, coarse=coarse)
         maps = coarse.detach() if self.feature_grad == "head" else coarse
         pooled = torch.einsum("nkhw,nchw->nkc", heat.detach(), maps)
         feat = self.feat_head(pooled)

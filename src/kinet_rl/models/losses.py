@@ -25,6 +25,16 @@ def check_loss_weights(ctr_temperature: float = 1.0, **weights: float) -> None:
         raise ValueError(f"ctr_temperature must be > 0, got {ctr_temperature}.")
 
 
+def keypoint_error(predicted: Tensor, target: Tensor) -> Tensor:
+    """The forward loss on keypoints: ``sum_k |x_hat_k - x_k|^2``, averaged over leading dims.
+
+    Args:
+        predicted: ``[*B, K, 2]`` predicted keypoints (e.g. ``[B, H, K, 2]`` over a rollout).
+        target: ``[*B, K, 2]`` detected keypoints (pass them detached).
+    """
+    return (predicted - target).pow(2).sum(dim=(-2, -1)).mean()
+
+
 #: Logits of the contrastive loss between two graphs (see :func:`graph_logits`).
 CTR_SIMILARITIES = ("dot", "cosine", "distance")
 #: Where the contrastive loss takes its negatives from.
@@ -161,7 +171,7 @@ class KINetLoss(LossModule):
         out = self.world_model.transition(tensordict)
         pred = out.prediction
         loss_rec = (out.reconstruction - out.target).pow(2).mean()
-        loss_fwd = (pred.next_pos - out.next_pos.detach()).pow(2).sum(dim=(-2, -1)).mean()
+        loss_fwd = keypoint_error(pred.next_pos, out.next_pos.detach())
         loss_kl = pred.kl.mean()
         if self.ctr_weight > 0:
             target_nodes = self.world_model.interaction.embed_nodes(
@@ -192,6 +202,6 @@ class KINetLoss(LossModule):
                     f"rollout_weight > 0 needs the pushes after each transition ({FUTURE_PIXELS!r}, "
                     f"{FUTURE_ACTION!r}); sample batches with trainer.horizon > 1."
                 )
-            error = (out.rollout - out.rollout_target).pow(2).sum(dim=(-2, -1))  # [B, H - 1]
-            losses["loss_rollout"] = self.rollout_weight * error.mean()
+            error = keypoint_error(out.rollout, out.rollout_target)  # mean over B and H - 1
+            losses["loss_rollout"] = self.rollout_weight * error
         return TensorDict(losses, batch_size=[])

@@ -26,7 +26,7 @@ from kinet_rl.keys import (
 )
 from kinet_rl.models.interaction import GraphPrediction, KeypointInteractionNet, graph_similarity
 from kinet_rl.models.world_model import KINetWorldModel
-from kinet_rl.planners.model_env import StateModelEnv
+from kinet_rl.planners.model_env import StateModelEnv, check_goal_image
 
 
 def chamfer_distance(pos: Tensor, goal_pos: Tensor) -> Tensor:
@@ -262,11 +262,7 @@ class KINetModelEnv(StateModelEnv):
         goal_pixels = goal_pixels.to(self.device)
         if pixels.dim() < 3 or pixels.shape[-1] != 3:
             raise ValueError(f"pixels must be [*B, H, W, 3] images, got {tuple(pixels.shape)}.")
-        if goal_pixels.shape[-3:] != pixels.shape[-3:]:
-            raise ValueError(
-                f"goal image {tuple(goal_pixels.shape[-3:])} and current image "
-                f"{tuple(pixels.shape[-3:])} must have the same [H, W, 3]; resize the goal image."
-            )
+        check_goal_image(pixels, goal_pixels)
         batch = pixels.shape[:-3]
         try:
             goal_fits = torch.broadcast_shapes(goal_pixels.shape[:-3], batch) == batch

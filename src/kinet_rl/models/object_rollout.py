@@ -1,4 +1,5 @@
-"""Object positions read off KINet's keypoints: the model's forward prediction on the table.
+"""Object positions read off a keypoint model's keypoints (KINet, V-CDN): its forward
+prediction on the table.
 
 Keypoints carry no identity, so they are related to objects in the frame where a prediction
 *starts* (never in the predicted frames): each keypoint belongs to its nearest object, and an object
@@ -66,25 +67,6 @@ def predict_object_positions(
     return obj_start + weights @ (kp_pred - kp_start)
 
 
-@torch.no_grad()
-def rollout_keypoints(model, pixels: Tensor, actions: Tensor) -> Tensor:
-    """Open-loop keypoint rollout of a KINet world model from a first frame.
-
-    Args:
-        pixels: [B, H, W, 3] frames where prediction starts.
-        actions: [B, L, 4] pushes.
-
-    Returns:
-        [B, L + 1, K, 2] keypoints: detected at step 0, predicted after.
-    """
-    pos, feat = model.detector(pixels)
-    trajectory = [pos]
-    for step in range(actions.shape[1]):
-        pos = model.interaction(pos, feat, actions[:, step]).next_pos
-        trajectory.append(pos)
-    return torch.stack(trajectory, dim=1)
-
-
 def objects_from_keypoints(kp: Tensor, object_pos: Tensor, geometry: SceneGeometry) -> Tensor:
     """Object positions after each step of a keypoint trajectory (see the module docstring).
 
@@ -107,7 +89,8 @@ def objects_from_keypoints(kp: Tensor, object_pos: Tensor, geometry: SceneGeomet
 
 
 class KeypointObjectRollout:
-    """KINet's ``ObjectRollout`` (:mod:`kinet_rl.evaluation.forward`): objects follow keypoints.
+    """A keypoint model's ``ObjectRollout`` (:mod:`kinet_rl.evaluation.forward`): objects follow
+    the keypoints of its ``rollout_keypoints``.
 
     Keypoints are related to objects in the start frame (:func:`keypoint_membership`, image
     space); each object then moves by the mean motion of its keypoints on the table plane.
@@ -120,7 +103,7 @@ class KeypointObjectRollout:
     @torch.no_grad()
     def __call__(self, start: TensorDictBase, actions: Tensor) -> Tensor:
         device = model_device(self.model)
-        kp = rollout_keypoints(self.model, start[PIXELS].to(device), actions.to(device)).cpu()
+        kp = self.model.rollout_keypoints(start[PIXELS].to(device), actions.to(device)).cpu()
         return objects_from_keypoints(kp, start[OBJECT_POS], self.geometry)
 
 

@@ -11,9 +11,8 @@ from typing import Any
 
 import torch
 from tensordict import TensorDictBase
-from torch import Tensor, nn
+from torch import Tensor
 
-from kinet_rl.envs.geometry import SceneGeometry
 from kinet_rl.keys import (
     ACTION,
     FUTURE_ACTION,
@@ -27,8 +26,8 @@ from kinet_rl.keys import (
 )
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.models.interaction import GraphPrediction, KeypointInteractionNet
+from kinet_rl.models.keypoint_model import KeypointWorldModel
 from kinet_rl.models.keypoints import KeypointDetector, KeypointReconstructor, pixels_to_input
-from kinet_rl.models.object_rollout import DetectorFloor, KeypointObjectRollout
 from kinet_rl.models.pretrained import pretrained_path
 
 log = logging.getLogger(__name__)
@@ -63,7 +62,7 @@ class TransitionOutputs:
     rollout_target: Tensor | None = None
 
 
-class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
+class KINetWorldModel(ConfigCheckpointMixin, KeypointWorldModel):
     """Keypoint detector ``f_kp``, reconstructor ``f_rec`` and interaction net ``f_fwd``.
 
     Keypoints fed to the interaction net are detached, so forward-model losses never move the
@@ -95,6 +94,7 @@ class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
     """
 
     checkpoint_format = CHECKPOINT_FORMAT
+    label = "KINet"
 
     def __init__(
         self,
@@ -203,30 +203,19 @@ class KINetWorldModel(ConfigCheckpointMixin, nn.Module):
         frames, actions = tensordict.get(FUTURE_PIXELS), tensordict.get(FUTURE_ACTION)
         with torch.no_grad():
             target, _ = self.detector(frames)  # [B, H - 1, K, 2]
+        return self._roll(pos, feat, actions), target
+
+    def _roll(self, pos: Tensor, feat: Tensor, actions: Tensor) -> Tensor:
+        """Keypoints ``[B, L, K, 2]`` after each of the pushes ``[B, L, 4]``, features carried."""
         steps = []
         for h in range(actions.shape[1]):
             pos = self.interaction(pos, feat, actions[:, h]).next_pos
             steps.append(pos)
-        return torch.stack(steps, dim=1), target
+        return torch.stack(steps, dim=1)
 
     @torch.no_grad()
-    def predict_pixels(self, pixels_0: Tensor, pos: Tensor) -> Tensor:
-        """Renders images ``f_rec(I_0, x_0, pos)``, e.g. the predicted future frame.
-
-        Args:
-            pixels_0: ``[B, H, W, 3]`` initial frames.
-            pos: ``[B, K, 2]`` keypoints of the frames to render (e.g. ``("next", KP_POS)``).
-
-        Returns:
-            ``[B, H, W, 3]`` float images in ``[0, 1]``.
-        """
-        source = self.detector.encode(pixels_0)
-        return (self.reconstructor.render(source, pos) + 0.5).clamp(0.0, 1.0)
-
-    def object_rollout(self, geometry: SceneGeometry) -> KeypointObjectRollout:
-        """Object positions read off predicted keypoints, for forward-prediction evaluation."""
-        return KeypointObjectRollout(self, geometry)
-
-    def detector_floor(self, geometry: SceneGeometry) -> DetectorFloor:
-        """Object positions read off keypoints detected in the true frames (Table I's floor)."""
-        return DetectorFloor(self, geometry)
+    def rollout_keypoints(self, pixels: Tensor, actions: Tensor) -> Tensor:
+        """Detected keypoints of ``pixels`` ``[B, H, W, 3]`` and the predicted ones after each
+        push ``[B, L, 4]``: ``[B, L + 1, K, 2]``."""
+        pos, feat = self.detector(pixels)
+        return torch.cat([pos.unsqueeze(1), self._roll(pos, feat, actions)], dim=1)

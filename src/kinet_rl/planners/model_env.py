@@ -13,11 +13,21 @@ from collections.abc import Mapping
 import torch
 from tensordict import NestedKey, TensorDictBase
 from tensordict.nn import TensorDictModuleBase
+from torch import Tensor
 from torchrl.data import Bounded, Composite, Unbounded
 from torchrl.envs.model_based import ModelBasedEnvBase
 
 #: Dimension of the push action (start x, start y, end x, end y).
 ACTION_DIM = 4
+
+
+def check_goal_image(pixels: Tensor, goal_pixels: Tensor) -> None:
+    """Raises a ValueError unless current and goal images ``[*B, H, W, 3]`` share ``[H, W, 3]``."""
+    if goal_pixels.shape[-3:] != pixels.shape[-3:]:
+        raise ValueError(
+            f"goal image {tuple(goal_pixels.shape[-3:])} and current image "
+            f"{tuple(pixels.shape[-3:])} must have the same [H, W, 3]; resize the goal image."
+        )
 
 
 class StateModelEnv(ModelBasedEnvBase):

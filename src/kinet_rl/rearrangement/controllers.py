@@ -90,7 +90,8 @@ class BaselineMPCController:
 
     "For all baseline models, we perform MPC directly on the distance to the goal" (KINet, Sec. 5):
     IN/VisIN plan on the true object positions towards the true goal positions; Forw/ForwInv
-    plan on image features towards the goal image's feature.
+    plan on image features towards the goal image's feature; V-CDN on its keypoints towards the
+    goal image's keypoints.
 
     Args:
         model: A baseline model (see :func:`~kinet_rl.baselines.make_baseline_env`).

@@ -2,7 +2,7 @@
 
 A method's controller factory gets a :class:`MethodContext` (the model, the episode's scene, the
 settings and the episode seed). ``needs`` says which model a method plans with: ``"kinet"``
-(a :class:`~kinet_rl.models.KINetWorldModel`), ``"baseline"`` (IN, VisIN, Forw or ForwInv) or
+(a :class:`~kinet_rl.models.KINetWorldModel`), ``"baseline"`` (IN, VisIN, Forw, ForwInv or V-CDN) or
 ``None`` (random pushes and the oracle need no model).
 """
 
@@ -81,8 +81,8 @@ class Method:
             )
         if self.needs == "baseline" and isinstance(model, KINetWorldModel):
             raise TypeError(
-                f"Method {self.name!r} plans with a baseline model (IN, VisIN, Forw or ForwInv), "
-                "got KINet; use a kinet_* method."
+                f"Method {self.name!r} plans with a baseline model (IN, VisIN, Forw, ForwInv or "
+                "V-CDN), got KINet; use a kinet_* method."
             )
 
     def controller(self, ctx: MethodContext) -> Controller:
@@ -154,7 +154,7 @@ METHODS: dict[str, Method] = {
             "Baseline model MPC (distance to goal)",
             "baseline",
             lambda ctx: BaselineMPCController(ctx.model, ctx.settings.planner, ctx.seed),
-            (PIXELS, OBJECT_POS),  # IN/VisIN plan on GT positions (Forw/ForwInv use pixels only)
+            (PIXELS, OBJECT_POS),  # IN/VisIN plan on GT positions (Forw/ForwInv/V-CDN: pixels only)
         ),
     )
 }
@@ -165,9 +165,12 @@ def check_methods(settings: RearrangementSettings) -> None:
     unknown = [m for m in settings.methods if m not in METHODS]
     if unknown:
         raise ValueError(f"Unknown methods {unknown}; choose from {list(METHODS)}.")
-    kinet_methods = [m.name for m in METHODS.values() if m.needs == "kinet"]
-    if settings.kinet_method not in kinet_methods:
-        raise ValueError(f"kinet_method={settings.kinet_method!r}; choose one of {kinet_methods}.")
+    model_methods = [m.name for m in METHODS.values() if m.needs is not None]
+    if settings.kinet_method not in model_methods:
+        raise ValueError(
+            f"kinet_method={settings.kinet_method!r}; choose one of {model_methods} (a KINet "
+            "method, or model_mpc for a baseline such as V-CDN)."
+        )
 
 
 def check_model(conditions: Iterable[Condition], model: nn.Module | None) -> None:

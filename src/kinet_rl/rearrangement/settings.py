@@ -116,7 +116,8 @@ class RearrangementSettings:
         split: ``"validation"`` (choosing) or ``"test"`` (reporting) episodes, see
             :data:`SPLIT_SEEDS`.
         videos: Episodes of ``kinet_method`` recorded as GIFs.
-        kinet_method: The KINet planner of the generalization conditions and the videos.
+        kinet_method: The planner of the generalization conditions, backgrounds and videos: a
+            KINet method, or ``model_mpc`` for a baseline that handles any object count (V-CDN).
     """
 
     scene: SceneSettings = field(default_factory=SceneSettings)
