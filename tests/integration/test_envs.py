@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import collections
+import itertools
+import json
 import logging
 import os
 
@@ -12,6 +15,8 @@ import torch
 from torchrl.envs.utils import check_env_specs
 
 from kinet_rl.envs import GYM_IDS, make_dm_env, make_env, workspace_for
+from kinet_rl.envs.geometry import camera_projection
+from kinet_rl.envs.scene import CAMERA_FRAMINGS
 
 pytestmark = pytest.mark.slow
 
@@ -216,3 +221,111 @@ def test_runtime_block_mass_properties_match_mujoco_compiler(geometry):
         np.testing.assert_allclose(
             np.sort(model.body_inertia[body_id]), np.sort(reference.body_inertia[1]), rtol=1e-6
         )
+
+
+@needs_ycb
+@pytest.mark.parametrize("camera", ["top", "side"])
+def test_every_image_corner_sees_the_ycb_table(camera: str) -> None:
+    corners = torch.tensor(list(itertools.product((-1.0, 1.0), repeat=2)))
+    projection = camera_projection("ycb", camera)
+    on_table = projection.to_plane(corners, workspace_for("ycb").table_height)
+    assert (on_table.abs() < workspace_for("ycb").table_half_size).all(), on_table
+
+
+@needs_ycb
+@pytest.mark.parametrize("camera", ["top", "side"])
+def test_the_reach_of_the_pushes_is_in_the_ycb_image(camera: str) -> None:
+    view = CAMERA_FRAMINGS["ycb"].top_view
+    corners = [(x, y, 0.0) for x, y in itertools.product((-view, view), repeat=2)]
+    if camera == "side":
+        corners.append((0.0, view, 0.1))  # the top of a tall object at the far edge
+    uv = camera_projection("ycb", camera).to_image(torch.tensor(corners))
+    assert (uv.abs() <= 1.0 + 1e-4).all(), uv
+    if camera == "side":  # fitted: the square is as large as the image allows
+        assert uv.abs().max() > 0.99
+
+
+@needs_ycb
+def test_the_reach_fills_most_of_the_side_image_height() -> None:
+    # The framing before this one (camera aimed at the table centre, floor in the top third)
+    # gave the square ~50% of the image height.
+    view = CAMERA_FRAMINGS["ycb"].top_view
+    edges = torch.tensor([[0.0, -view, 0.0], [0.0, view, 0.0]])
+    uv = camera_projection("ycb", "side").to_image(edges)
+    assert (uv[0, 1] - uv[1, 1]) / 2 > 0.6
+
+
+def _write_cube_folder(root, half_extents: dict[str, float]) -> None:
+    """An object folder of the documented layout with one textured cube per name."""
+    from PIL import Image
+
+    signs = list(itertools.product((-1, 1), repeat=3))
+    faces = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1)]
+    faces += [(2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
+    entries = []
+    for name, h in half_extents.items():
+        (root / name).mkdir(parents=True)
+        vertices = "".join(f"v {sx * h} {sy * h} {sz * h}\n" for sx, sy, sz in signs)
+        uv = "vt 0 0\nvt 1 0\nvt 1 1\n"
+        (root / name / "visual.obj").write_text(
+            vertices + uv + "".join(f"f {a + 1}/1 {b + 1}/2 {c + 1}/3\n" for a, b, c in faces)
+        )
+        (root / name / "collision_00.obj").write_text(
+            vertices + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces)
+        )
+        Image.new("RGB", (8, 8), (200, 40, 40)).save(root / name / "texture.png")
+        entries.append(
+            {
+                "name": name,
+                "visual_mesh": f"{name}/visual.obj",
+                "texture": f"{name}/texture.png",
+                "collision_meshes": [f"{name}/collision_00.obj"],
+                "collision_density_kg_m3": 400.0,
+                "half_extents_m": [h, h, h],
+            }
+        )
+    (root / "manifest.json").write_text(json.dumps({"objects": entries}))
+
+
+def test_any_object_folder_of_the_documented_layout_can_be_pushed(tmp_path):
+    _write_cube_folder(tmp_path, {"small_cube": 0.03, "big_cube": 0.05})
+    env = make_dm_env(task="ycb", num_objects=2, seed=0, ycb_dir=tmp_path, image_size=32)
+    ts = env.reset()
+    assert set(env.task.active) == {"ycb_small_cube", "ycb_big_cube"}
+    assert ts.observation["pixels"].shape == (32, 32, 3)
+    pos0 = ts.observation["object_pos"]
+    target = pos0[0]
+    direction = -np.sign(target[0]) or 1.0  # push towards the centre
+    start = target - direction * np.array([0.12, 0.0])
+    end = target + direction * np.array([0.06, 0.0])
+    ws = env.task.workspace
+    ts = env.step(np.concatenate([ws.to_action(start), ws.to_action(end)]))
+    assert not env.task.unstable
+    assert (ts.observation["object_pos"][0, 0] - pos0[0, 0]) * direction > 0.03
+
+
+@needs_ycb
+def test_random_push_collection_discards_at_most_two_percent_of_ycb_episodes():
+    """100 episodes (seeds 0-99) of 60 collection-policy pushes with 3 of the 12 YCB objects."""
+    from kinet_rl.data.policy import RandomPushPolicy
+
+    episodes, seen, discarded = 100, collections.Counter(), collections.Counter()
+    for seed in range(episodes):
+        env = make_dm_env(task="ycb", num_objects=3, seed=seed, image_size=16)
+        ts, task = env.reset(), env.task
+        policy, rng = RandomPushPolicy(task.workspace.half_size), np.random.default_rng(seed)
+        for _ in range(60):
+            pushes_at = ts.observation["object_pos"] / task.workspace.half_size
+            ts = env.step(policy.sample_push(rng, pushes_at))
+            if task.unstable:
+                break
+        seen.update(task.active)
+        if task.unstable:
+            discarded.update(task.active)
+        env.close()
+    discarded_episodes = sum(discarded.values()) / 3  # a discarded episode counts its 3 objects
+    assert discarded_episodes <= 0.02 * episodes, dict(discarded)
+    assert max(discarded.values(), default=0) <= 1, (
+        f"objects in discarded episodes: {dict(discarded)}"
+    )
+    assert len(seen) == 12  # every object was drawn

@@ -16,7 +16,19 @@ from kinet_rl.envs.textures import table_texture_assets
 from kinet_rl.envs.workspace import workspace_for
 from kinet_rl.envs.ycb import load_ycb_objects
 
-__all__ = ["PushEnvironment", "check_env_arguments", "make_dm_env", "make_env", "MAX_OBJECTS"]
+#: Push settings of each task. A YCB push that would start on top of an object (they are up
+#: to 21 cm across) lifts the pusher again instead of dragging the object along; BlockObjs keeps
+#: the behaviour its datasets were collected with.
+DEFAULT_PUSH_SETTINGS = {"blocks": PushSettings(), "ycb": PushSettings(retract_when_blocked=True)}
+
+__all__ = [
+    "DEFAULT_PUSH_SETTINGS",
+    "PushEnvironment",
+    "check_env_arguments",
+    "make_dm_env",
+    "make_env",
+    "MAX_OBJECTS",
+]
 
 
 class PushEnvironment(control.Environment):
@@ -56,7 +68,7 @@ def make_dm_env(
         seed: seed of the task's random state.
         ycb_dir: YCB asset folder with ``manifest.json``; defaults to ``$KINET_RL_YCB_DIR``.
         ycb_objects: names of the YCB objects to draw from (default: all in the manifest).
-        settings: push speeds and thresholds.
+        settings: push speeds and thresholds (default: ``DEFAULT_PUSH_SETTINGS[task]``).
     """
     SceneSettings(task, num_objects, camera, image_size, geometry, background)  # checks them
     workspace = workspace_for(task)
@@ -81,7 +93,7 @@ def make_dm_env(
         background=background,
         geometry=geometry,
         ycb_objects=candidates,
-        settings=settings,
+        settings=settings or DEFAULT_PUSH_SETTINGS[task],
         random=seed,
     )
     return PushEnvironment(physics, push_task, time_limit=float("inf"), legacy_step=False)

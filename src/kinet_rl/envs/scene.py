@@ -12,6 +12,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from kinet_rl.envs.textures import TABLE_TEXTURES
 from kinet_rl.envs.workspace import Workspace
 from kinet_rl.envs.ycb import YcbObject
@@ -21,6 +23,8 @@ __all__ = [
     "blocks_scene_xml",
     "ycb_scene_xml",
     "CAMERAS",
+    "CameraFraming",
+    "CAMERA_FRAMINGS",
     "PUSHER_RADIUS",
     "PUSHER_HALF_LENGTH",
 ]
@@ -30,8 +34,84 @@ TIMESTEP = 0.005
 PUSHER_RADIUS = 0.01
 PUSHER_HALF_LENGTH = 0.04
 PUSHER_PARK = (3.0, 3.0, 1.0)  # far outside both camera views
-SIDE_ELEVATION = math.radians(40.0)
 FRICTION = "0.5 0.005 0.0001"
+#: YCB objects include cans and a bowl that roll: their contacts get torsional and rolling
+#: friction (condim 6), so a pushed can or bowl stops instead of rolling off the table.
+YCB_CONTACT = 'friction="0.5 0.01 0.002" condim="6"'
+TOP_CAMERA_HEIGHT = 1.0
+
+
+@dataclass(frozen=True)
+class CameraFraming:
+    """Where the top and side cameras of a task look (metres and degrees).
+
+    The top camera looks straight down from ``TOP_CAMERA_HEIGHT`` and sees the square
+    ``[-top_view, top_view]^2``. The side camera sits ``side_distance`` from the table centre at
+    ``side_elevation`` above the table on the ``-y`` side; its axis points ``side_pitch`` below
+    the horizontal (the elevation: it looks at the table centre) with a vertical field of view
+    of ``side_fovy``.
+    """
+
+    top_view: float
+    side_elevation: float
+    side_distance: float
+    side_pitch: float
+    side_fovy: float
+
+    def side_position(self, table_height: float) -> tuple[float, float, float]:
+        """The side camera's position in the world frame."""
+        e = math.radians(self.side_elevation)
+        return (
+            0.0,
+            -self.side_distance * math.cos(e),
+            table_height + self.side_distance * math.sin(e),
+        )
+
+    @classmethod
+    def fitted(
+        cls, view: float, object_height: float, elevation: float, distance: float
+    ) -> CameraFraming:
+        """The framing whose side camera just sees the square ``[-view, view]^2`` on the table.
+
+        The pitch centres the near edge (on the table) and the far edge (``object_height``
+        above it) vertically; the field of view is the smallest that holds both edges and
+        the near corners (the widest part of the square in a perspective image).
+        """
+        e = math.radians(elevation)
+        camera = np.array([0.0, -distance * math.cos(e), distance * math.sin(e)])
+
+        def below_horizon(point: np.ndarray) -> float:
+            ray = point - camera
+            return math.atan2(-ray[2], ray[1])
+
+        near = below_horizon(np.array([0.0, -view, 0.0]))
+        far = below_horizon(np.array([0.0, view, object_height]))
+        pitch = (near + far) / 2
+        forward = np.array([0.0, math.cos(pitch), -math.sin(pitch)])
+        corner = np.array([view, -view, 0.0]) - camera
+        tan_half = max(math.tan((near - far) / 2), corner[0] / (corner @ forward))
+        return cls(
+            top_view=view,
+            side_elevation=elevation,
+            side_distance=distance,
+            side_pitch=math.degrees(pitch),
+            side_fovy=math.degrees(2 * math.atan(tan_half)),
+        )
+
+
+#: Camera framing of each task. BlockObjs keeps the framing its datasets and shipped weights
+#: were made with (the side camera also sees the floor behind the table); YCBObjs cameras are
+#: fitted to the reach of the pushes (1.25 x the workspace) on a table that fills both images.
+CAMERA_FRAMINGS: dict[str, CameraFraming] = {
+    "blocks": CameraFraming(
+        top_view=0.25,
+        side_elevation=40.0,
+        side_distance=1.1,
+        side_pitch=40.0,
+        side_fovy=math.degrees(2 * math.atan(1.12 * 0.25 / 1.1)),
+    ),
+    "ycb": CameraFraming.fitted(view=0.375, object_height=0.1, elevation=50.0, distance=1.3),
+}
 
 
 @dataclass(frozen=True)
@@ -65,21 +145,18 @@ def _header(name: str, workspace: Workspace, image_size: int, midphase: bool) ->
 """
 
 
-def _world(workspace: Workspace, object_xml: str) -> str:
+def _world(workspace: Workspace, framing: CameraFraming, object_xml: str) -> str:
     th, half = workspace.table_height, workspace.table_half_size
-    view = 1.25 * workspace.half_size
-    top_height = 1.0
-    fovy = math.degrees(2 * math.atan(view / top_height))
-    dist = 1.1
-    side_pos = (0.0, -dist * math.cos(SIDE_ELEVATION), th + dist * math.sin(SIDE_ELEVATION))
-    side_fovy = math.degrees(2 * math.atan(1.12 * view / dist))
-    s, c = math.sin(SIDE_ELEVATION), math.cos(SIDE_ELEVATION)
+    fovy = math.degrees(2 * math.atan(framing.top_view / TOP_CAMERA_HEIGHT))
+    side_pos = framing.side_position(th)
+    pitch = math.radians(framing.side_pitch)
+    s, c = math.sin(pitch), math.cos(pitch)
     return f"""  <worldbody>
     <light name="key" pos="0.4 -0.4 1.5" dir="-0.25 0.25 -1" directional="true" castshadow="false" diffuse="0.45 0.45 0.45"/>
     <geom name="floor" type="plane" size="4 4 0.1" pos="0 0 {th - 0.75}" material="floor" contype="0" conaffinity="0"/>
     <geom name="table" type="box" pos="0 0 {th - 0.025}" size="{half} {half} 0.025" material="table_plain" friction="{FRICTION}"/>
-    <camera name="top" pos="0 0 {th + top_height}" xyaxes="1 0 0 0 1 0" fovy="{fovy:.4f}"/>
-    <camera name="side" pos="{side_pos[0]} {side_pos[1]:.4f} {side_pos[2]:.4f}" xyaxes="1 0 0 0 {s:.5f} {c:.5f}" fovy="{side_fovy:.4f}"/>
+    <camera name="top" pos="0 0 {th + TOP_CAMERA_HEIGHT}" xyaxes="1 0 0 0 1 0" fovy="{fovy:.4f}"/>
+    <camera name="side" pos="{side_pos[0]} {side_pos[1]:.4f} {side_pos[2]:.4f}" xyaxes="1 0 0 0 {s:.5f} {c:.5f}" fovy="{framing.side_fovy:.4f}"/>
     <body name="pusher" gravcomp="1">
       <joint name="pusher_x" type="slide" axis="1 0 0"/>
       <joint name="pusher_y" type="slide" axis="0 1 0"/>
@@ -114,7 +191,7 @@ def blocks_scene_xml(
     xml = (
         _header("kinet_push_blocks", workspace, image_size, midphase=False)
         + "  </asset>\n"
-        + _world(workspace, "".join(bodies))
+        + _world(workspace, CAMERA_FRAMINGS["blocks"], "".join(bodies))
     )
     layout = SceneLayout(
         tuple(f"obj_{i}" for i in range(num_objects)), tuple(f"table_{t}" for t in TABLE_TEXTURES)
@@ -140,7 +217,7 @@ def ycb_scene_xml(
         )
         collision = "".join(
             f'      <geom name="{n}_col{k}" type="mesh" mesh="{n}_col{k}" group="3" density="{obj.density}" '
-            f'conaffinity="3" friction="{FRICTION}" rgba="0.5 0.5 0.5 0.3"/>\n'
+            f'conaffinity="3" {YCB_CONTACT} rgba="0.5 0.5 0.5 0.3"/>\n'
             for k in range(len(obj.collision_meshes))
         )
         bodies.append(
@@ -154,7 +231,7 @@ def ycb_scene_xml(
         _header("kinet_push_ycb", workspace, image_size, midphase=True)
         + "".join(assets)
         + "  </asset>\n"
-        + _world(workspace, "".join(bodies))
+        + _world(workspace, CAMERA_FRAMINGS["ycb"], "".join(bodies))
     )
     layout = SceneLayout(
         tuple(f"ycb_{o.name}" for o in objects), tuple(f"table_{t}" for t in TABLE_TEXTURES)

@@ -56,6 +56,10 @@ _BAD_STATE_WARNINGS = (
     mujoco.mjtWarning.mjWARN_BADQVEL,
     mujoco.mjtWarning.mjWARN_BADQACC,
 )
+#: A lowered pusher that, after ``BLOCKED_HOLD_STEPS`` of holding still (its servo lags ~1 cm
+#: while moving), is farther than this (metres) from its target was stopped by an object.
+BLOCKED_TOLERANCE = 0.005
+BLOCKED_HOLD_STEPS = 20
 
 
 @dataclass(frozen=True)
@@ -72,6 +76,8 @@ class PushSettings:
         rest_angular_speed: ... and this angular speed (rad/s).
         blowup_speed: an object faster than this (m/s) means a blown-up contact.
         blowup_angular_speed: same for angular speed (rad/s).
+        retract_when_blocked: when an object stops the lowering pusher (the push starts on top
+            of it), lift the pusher again instead of dragging the object along the push.
     """
 
     push_speed: float = 0.25
@@ -83,6 +89,7 @@ class PushSettings:
     rest_angular_speed: float = 0.05
     blowup_speed: float = 3.0
     blowup_angular_speed: float = 60.0
+    retract_when_blocked: bool = False
 
 
 class PushPhysics(dm_mujoco.Physics):
@@ -298,10 +305,14 @@ class PushObjects(base.Task):
 
     def before_step(self, action: np.ndarray, physics: PushPhysics) -> None:
         """Execute one push: appear above the start, lower, push to the end, lift, park."""
-        above_start, moves = self.push_plan(action)
+        above_start, (lower, push, lift) = self.push_plan(action)
         self._place_pusher(physics, above_start)
-        for target, speed in moves:
-            self._move_pusher(physics, target, speed)
+        self._move_pusher(physics, *lower)
+        if self.settings.retract_when_blocked and self._pusher_blocked(physics, lower[0]):
+            self._move_pusher(physics, above_start, lift[1])
+        else:
+            self._move_pusher(physics, *push)
+            self._move_pusher(physics, *lift)
         self._park_pusher(physics)
         self._check_unstable(physics)
 
@@ -319,6 +330,12 @@ class PushObjects(base.Task):
         data.qvel[dof_ids] = 0.0
         data.act[act_ids] = xyz
         data.ctrl[:] = 0.0
+
+    def _pusher_blocked(self, physics: PushPhysics, target: np.ndarray) -> bool:
+        """Holds the pusher still, then whether an object stopped it short of ``target``."""
+        mujoco.mj_step(physics.model.ptr, physics.data.ptr, nstep=BLOCKED_HOLD_STEPS)
+        position = physics.data.ptr.qpos[self._pusher[0]]
+        return bool(np.linalg.norm(position - target) > BLOCKED_TOLERANCE)
 
     def _park_pusher(self, physics: PushPhysics) -> None:
         self._place_pusher(physics, PUSHER_PARK)

@@ -66,10 +66,11 @@ class Workspace:
 
 
 #: Workspace of each task. Blocks are 3-9 cm, YCB objects up to 21 cm across, so the YCB
-#: workspace is larger to fit 5 of them; cameras frame ``table_half_size``.
+#: workspace is larger to fit 5 of them. The YCB table is large enough to fill the side
+#: camera's image (``scene.CAMERA_FRAMINGS``), so objects pushed past the workspace stay on it.
 WORKSPACES: dict[str, Workspace] = {
     "blocks": Workspace(half_size=0.20, table_height=0.0, table_half_size=0.30),
-    "ycb": Workspace(half_size=0.30, table_height=0.0, table_half_size=0.42),
+    "ycb": Workspace(half_size=0.30, table_height=0.0, table_half_size=0.85),
 }
 
 
