@@ -57,11 +57,12 @@ DATASET_ENV_KEYS = ("task", "camera", "image_size", "num_objects")
 #: File name of a trained model in its run directory.
 KINET_FILE, BASELINE_FILE = "kinet.pt", "model.pt"
 #: Top-level keys of the root config (``conf/config.yaml``); ``checkpoint`` is read by
-#: ``kinet_rl.evaluate``.
+#: ``kinet_rl.evaluate``, ``estimate`` by ``kinet_rl.train``.
 ROOT_KEYS = (
     "exp_name",
     "seed",
     "device",
+    "estimate",
     "checkpoint",
     "env",
     "data",
@@ -100,6 +101,8 @@ class ExperimentSettings:
         wandb_kwargs: Extra arguments of the W&B logger.
         model_config: The model's config, part of the run identity that resuming checks.
         loss_config: The loss's config, likewise.
+        estimate: Measure this machine's speed and log a time estimate before any work
+            (:mod:`kinet_rl.estimate`; False logs the plan alone).
     """
 
     name: str
@@ -114,6 +117,7 @@ class ExperimentSettings:
     wandb_kwargs: Mapping[str, Any] = field(default_factory=dict)
     model_config: Mapping[str, Any] = field(default_factory=dict)
     loss_config: Mapping[str, Any] = field(default_factory=dict)
+    estimate: bool = True
 
     def __post_init__(self) -> None:
         require(self.logger in LOGGER_KINDS, "logger.kind", self.logger, f"one of {LOGGER_KINDS}")
@@ -215,6 +219,7 @@ class ExperimentSettings:
             ),
             model_config=model_config,
             loss_config=loss_config,
+            estimate=conform("estimate", cfg.get("estimate", True), bool),
         )
 
     @property
@@ -323,26 +328,51 @@ def dataset_path(data: Mapping[str, Any]) -> Path:
     return Path(data["root"]) / data["name"]
 
 
-def collect_datasets(env: Mapping[str, Any], data: Mapping[str, Any]) -> list[Path]:
-    """Collects the main dataset of ``data`` and then each of its generalization sets.
+@dataclass(frozen=True)
+class DatasetJob:
+    """One dataset an experiment collects.
+
+    Attributes:
+        arguments: Keyword arguments of :func:`collect_dataset` (without ``env_fn`` and
+            ``env_config``).
+        env: Arguments of :func:`make_env` for its episodes.
+    """
+
+    arguments: Mapping[str, Any]
+    env: Mapping[str, Any]
+
+    @property
+    def path(self) -> Path:
+        """The dataset's folder."""
+        return dataset_path(self.arguments)
+
+    def collect(self) -> Path:
+        """Collects the dataset (skipped when complete, resumed when partial); returns its folder."""
+        env_fn = functools.partial(make_env, **self.env)
+        return collect_dataset(env_fn=env_fn, env_config=dict(self.env), **self.arguments)
+
+
+def dataset_jobs(env: Mapping[str, Any], data: Mapping[str, Any]) -> list[DatasetJob]:
+    """The main dataset of ``data``, then each of its generalization sets, in collection order.
 
     Generalization set ``i`` (1-based, in order) uses seed ``data.seed + i`` unless it sets its
-    own; its ``env`` entry overrides the env settings. Complete datasets are skipped, partial ones
-    resumed.
+    own; its ``env`` entry overrides the env settings.
     """
     main = dict(data)
     generalization = main.pop("generalization", None) or {}
-    jobs: list[tuple[dict[str, Any], dict[str, Any]]] = [(main, {})]
+    jobs = [DatasetJob(main, dict(env))]
     for offset, (name, extra) in enumerate(generalization.items(), start=1):
         extra = dict(extra)
         env_overrides = extra.pop("env", None) or {}
-        jobs.append(({**main, "seed": main["seed"] + offset, **extra, "name": name}, env_overrides))
-    paths = []
-    for job, env_overrides in jobs:
-        env_config = {**env, **env_overrides}
-        env_fn = functools.partial(make_env, **env_config)
-        paths.append(collect_dataset(env_fn=env_fn, env_config=env_config, **job))
-    return paths
+        arguments = {**main, "seed": main["seed"] + offset, **extra, "name": name}
+        jobs.append(DatasetJob(arguments, {**env, **env_overrides}))
+    return jobs
+
+
+def collect_datasets(env: Mapping[str, Any], data: Mapping[str, Any]) -> list[Path]:
+    """Collects every dataset of :func:`dataset_jobs`: complete ones are skipped, partial ones
+    resumed."""
+    return [job.collect() for job in dataset_jobs(env, data)]
 
 
 def evaluate_rearrangement(

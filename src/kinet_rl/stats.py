@@ -1,9 +1,12 @@
-"""Intervals of the reported numbers: Student's t for means, Wilson for success rates."""
+"""Intervals of the reported numbers (Student's t for means, Wilson for success rates) and
+Spearman's rank correlation."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+
+import numpy as np
 
 #: Two-sided 95% quantiles of Student's t by degrees of freedom (larger: the normal 1.96 is used).
 T_975 = {
@@ -42,3 +45,26 @@ def wilson_interval(successes: int, n: int) -> tuple[float, float]:
     centre = (p + z2 / (2 * n)) / (1 + z2 / n)
     half = Z_975 * math.sqrt(p * (1 - p) / n + z2 / (4 * n * n)) / (1 + z2 / n)
     return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def average_ranks(values: Sequence[float] | np.ndarray) -> np.ndarray:
+    """Ranks 1..n of ``values``; tied values share the mean of their ranks."""
+    values = np.asarray(values, dtype=np.float64)
+    order = np.argsort(values, kind="stable")
+    ranks = np.empty(len(values))
+    ranks[order] = np.arange(1, len(values) + 1)
+    _, groups = np.unique(values, return_inverse=True)
+    return (np.bincount(groups, weights=ranks) / np.bincount(groups))[groups]
+
+
+def spearman(x: Sequence[float] | np.ndarray, y: Sequence[float] | np.ndarray) -> float | None:
+    """Spearman's rank correlation of paired values (Pearson's of their :func:`average_ranks`),
+    in [-1, 1]; None when it is undefined (fewer than 2 pairs, or one side constant)."""
+    if len(x) != len(y):
+        raise ValueError(f"spearman needs paired values; got {len(x)} and {len(y)}.")
+    if len(x) < 2:
+        return None
+    rx, ry = average_ranks(x), average_ranks(y)
+    dx, dy = rx - rx.mean(), ry - ry.mean()
+    scale = math.sqrt(float((dx * dx).sum() * (dy * dy).sum()))
+    return float((dx * dy).sum() / scale) if scale > 0 else None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -44,6 +45,7 @@ def test_episode_goal_is_reproducible_reachable_and_start_restored() -> None:
 def test_oracle_mpc_beats_random_pushes_in_the_simulator() -> None:
     task = TaskSettings(num_steps=10)
     finals: dict[str, list[float]] = {"oracle": [], "random": []}
+    final_ssim: dict[str, list[float]] = {"oracle": [], "random": []}
     initial = []
     for seed in range(3):
         for method in finals:
@@ -56,9 +58,13 @@ def test_oracle_mpc_beats_random_pushes_in_the_simulator() -> None:
             result = run_episode(episode, controller, method, task)
             episode.close()
             finals[method].append(result.distances[-1])
+            final_ssim[method].append(result.goal_ssim[-1])
+            assert result.goal_ssim.shape == result.distances.shape == (task.num_steps + 1,)
         initial.append(result.distances[0])
     assert np.mean(finals["oracle"]) < 0.5 * np.mean(initial)
     assert np.mean(finals["oracle"]) < 0.5 * np.mean(finals["random"])
+    # The image metric agrees: the oracle's last images look more like the goal's.
+    assert np.mean(final_ssim["oracle"]) > np.mean(final_ssim["random"])
 
 
 def test_evaluate_rearrangement_writes_plot_markdown_json_and_video_and_resumes(
@@ -81,12 +87,16 @@ def test_evaluate_rearrangement_writes_plot_markdown_json_and_video_and_resumes(
     assert set(summary["comparison"]) == set(settings.methods)
     for stats in summary["comparison"].values():
         assert stats["episodes"] == 2 and len(stats["mean_curve"]) == 4
+        # The goal-image SSIM beside the ground-truth distance (pooled over 2 episodes x 4 steps).
+        assert len(stats["goal_ssim_curve"]) == 4 and 0 < stats["final_goal_ssim"] <= 1
+        assert math.isfinite(stats["goal_ssim_spearman"]) and -1 <= stats["goal_ssim_spearman"] <= 1
     # Same episodes for every method: identical start distances.
     starts = {round(s["mean_curve"][0], 9) for s in summary["comparison"].values()}
     assert len(starts) == 1
     with Image.open(tmp_path / "rearrangement.png") as plot_image:
         assert plot_image.size[0] > 100
-    assert "| N | geom_gen |" in (tmp_path / "rearrangement.md").read_text()
+    report = (tmp_path / "rearrangement.md").read_text()
+    assert "| N | geom_gen |" in report and "| final SSIM | rho(SSIM, distance) |" in report
     assert (
         json.loads((tmp_path / "rearrangement.json").read_text())["summary"].keys()
         == summary.keys()

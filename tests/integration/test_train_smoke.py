@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -38,10 +39,27 @@ def run_train(tmp: Path, *overrides: str, launcher: tuple[str, ...] = ("-m",)) -
         f"hydra.run.dir={tmp / 'run'}",
         *overrides,
     ]
-    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "OMP_NUM_THREADS": "1"}
-    result = subprocess.run(command, cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
-    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]
-    return result.stdout + result.stderr
+    env = {
+        **os.environ,
+        "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"),
+        "OMP_NUM_THREADS": "1",
+        "PYTHONUNBUFFERED": "1",  # stdout (logs) and stderr (progress bars) in the order written
+    }
+    result = subprocess.run(
+        command,
+        cwd=REPO,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stdout[-6000:]
+    return result.stdout
+
+
+#: The first run's output, kept beside its data and run directory.
+FIRST_OUTPUT = "first_run_output.txt"
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +67,22 @@ def smoke_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     tmp = tmp_path_factory.mktemp("train")
     output = run_train(tmp)  # also collects smoke_2obj, a 2-object generalization set
     assert "Keypoint accuracy" in output  # the report is printed at the end
+    (tmp / FIRST_OUTPUT).write_text(output)
     return tmp
+
+
+def test_the_plan_is_logged_before_the_first_collection(smoke_run: Path) -> None:
+    output = (smoke_run / FIRST_OUTPUT).read_text()
+    plan = output.index("Plan of smoke (run directory")
+    first_collection = re.search(r"smoke:\s+\d+%\|", output)  # the dataset's progress bar
+    assert first_collection is not None and plan < first_collection.start()
+    lines = output[plan : first_collection.start()].splitlines()
+    assert "  collect smoke: 10 episodes x 5 pushes, 1 worker; new, ~" in "\n".join(lines)
+    assert any(line.startswith("  train KINetWorldModel: 6 steps at batch 4") for line in lines)
+    (estimate,) = [line for line in lines if "estimated wall time on this machine" in line]
+    per_push = float(re.search(r"from (\d+) ms per push", estimate).group(1))
+    assert 0 < per_push < 1000  # a measured rate of a 32 px, 3-block push
+    assert "+scale=cpu" not in output  # the cpu scale is larger than the smoke run
 
 
 def test_run_writes_model_report_images_and_logs(smoke_run: Path) -> None:
@@ -190,3 +223,10 @@ def test_kinet_takes_other_object_counts_and_in_refuses_them(smoke_run: Path) ->
         forward_errors(
             trained_on_three.object_rollout(geometry), two_objects, (1,), num_sequences=4
         )
+
+
+def test_estimate_false_logs_the_plan_without_measuring(smoke_run: Path) -> None:
+    output = run_train(smoke_run, "estimate=false")  # already trained: nothing left to do
+    assert "  collect smoke: 10 episodes x 5 pushes, 1 worker; complete" in output
+    assert re.search(r"resumes at step \d+", output)
+    assert "no time estimate (estimate=false)" in output and "estimated wall time" not in output

@@ -26,6 +26,7 @@ LAYERS = [
     {"rearrangement"},
     {"comparison"},
     {"pipeline"},
+    {"estimate"},
     ENTRY_POINTS,
 ]
 

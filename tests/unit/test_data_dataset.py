@@ -16,6 +16,7 @@ from kinet_rl.data import (
     DatasetIncompleteError,
     DatasetMismatchError,
     DatasetNotFoundError,
+    PushDataset,
     collect_dataset,
     load_dataset,
 )
@@ -167,3 +168,16 @@ def test_a_horizon_adds_the_following_pushes_and_frames(dataset_path: Path) -> N
     assert "future" not in data.sample(4, torch.Generator().manual_seed(0)).keys()  # noqa: SIM118
     with pytest.raises(ValueError, match="horizon must lie in"):
         data.sample(4, horizon=T + 1)
+
+
+def test_episodes_in_memory_give_the_transitions_of_the_stored_dataset(dataset_path: Path) -> None:
+    on_disk = load_dataset(dataset_path, "all")
+    stored = TensorDict.load_memmap(dataset_path / EPISODES_DIR)
+    in_memory = PushDataset.from_episodes(stored.to_tensordict())
+    assert (in_memory.episode_length, in_memory.image_size, in_memory.num_objects) == (T, H, N)
+    assert len(in_memory) == len(on_disk) and in_memory.path is None
+    episode, step = torch.tensor([0, 3, 9, 9]), torch.tensor([0, 1, 1, 2])
+    expected = on_disk.transitions(episode, step, horizon=2)
+    assert (in_memory.transitions(episode, step, horizon=2) == expected).all()
+    with pytest.raises(ValueError, match=r"TensorDict \[E\] with E >= 1"):
+        PushDataset.from_episodes(stored[0].to_tensordict())

@@ -14,14 +14,20 @@ def test_markdown_lists_methods_and_the_generalization_table() -> None:
     settings = RearrangementSettings(num_objects=(1, 2), geometries=("train",), backgrounds=())
     comparison, n1, _ = settings.conditions()  # the n2 cell has no results: shown as "-"
     episode = EpisodeResult("x", 0, np.array([0.08, 0.012]), True, False)
+    measured = EpisodeResult("x", 0, np.array([0.08, 0.012]), True, False, np.array([0.6, 0.9]))
     episodes = {
-        comparison: {"kinet_graph": [episode], "random": [episode]},
+        comparison: {"kinet_graph": [episode], "random": [measured]},
         n1: {settings.kinet_method: [episode]},
     }
     labels = {name: METHODS[name].label for name in ("kinet_graph", "random")}
     text = markdown(RearrangementResults(settings, episodes, labels), "plot.png")
     # One success in one episode: 100% with the Wilson interval [21, 100].
-    assert "| KINet-GraphMPC (paper S, cosine) | 1 | 80.0 | 12.0 ± 0.0 | 100% [21, 100] |" in text
+    assert (
+        "| KINet-GraphMPC (paper S, cosine) | 1 | 80.0 | 12.0 ± 0.0 | 100% [21, 100] | - | - |"
+        in text
+    )  # an episode without SSIM (e.g. stored by an older version) shows "-"
+    assert "| 1 | 80.0 | 12.0 ± 0.0 | 100% [21, 100] | 0.900 | -1.000 |" in text
+    assert "rho: Spearman's rank correlation of the SSIM with the distance" in text
     assert "Test episodes, seeds 50000 + i" in text
     assert "Planner of every method: 64 candidates x 3 iterations (top 8), horizon 1" in text
     assert "| 1 | 12.0 ± 0.0 (80.0) |" in text and "| 2 | - |" in text

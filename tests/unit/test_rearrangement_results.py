@@ -46,3 +46,19 @@ def test_results_summarize_each_condition_by_name() -> None:
         "comparison": {"random": summarize([episode])},
         "n2_geom_train": {"random": summarize([episode, episode])},
     }
+
+
+def test_summary_reports_the_goal_ssim_and_how_it_tracks_the_distance() -> None:
+    distances = (np.array([0.10, 0.06, 0.02]), np.array([0.08, 0.09, 0.05]))
+    similarities = (np.array([0.70, 0.80, 0.95]), np.array([0.75, 0.72, 0.85]))
+    episodes = [
+        EpisodeResult("oracle", s, d, False, False, goal_ssim=g)
+        for s, (d, g) in enumerate(zip(distances, similarities, strict=True))
+    ]
+    stats = summarize(episodes)
+    assert stats["final_goal_ssim"] == pytest.approx(0.9)
+    assert stats["goal_ssim_curve"] == pytest.approx([0.725, 0.76, 0.9])
+    # Pooled over both episodes' pushes the SSIM falls exactly as the distance rises.
+    assert stats["goal_ssim_spearman"] == pytest.approx(-1.0)
+    unmeasured = summarize([EpisodeResult("random", 0, distances[0], False, False)])
+    assert unmeasured["final_goal_ssim"] is None and unmeasured["goal_ssim_spearman"] is None

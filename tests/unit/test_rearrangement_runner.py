@@ -76,7 +76,7 @@ def test_stored_episodes_round_trip_and_belong_to_one_model_and_settings(
     settings = RearrangementSettings(episodes=2)
     rng = np.random.default_rng(0)
     result = EpisodeResult(
-        "kinet_graph", 10_001, rng.uniform(size=5), True, False,
+        "kinet_graph", 10_001, rng.uniform(size=5), True, False, rng.uniform(size=5),
         frames=[rng.integers(0, 255, (8, 8, 3), dtype=np.uint8) for _ in range(5)],
         keypoints=[rng.uniform(-1, 1, (4, 2)) for _ in range(5)],
         goal_pixels=rng.integers(0, 255, (8, 8, 3), dtype=np.uint8),
@@ -88,7 +88,7 @@ def test_stored_episodes_round_trip_and_belong_to_one_model_and_settings(
     )
     assert loaded is not None and (loaded.method, loaded.seed) == (result.method, result.seed)
     assert (loaded.success, loaded.unstable) == (True, False)
-    for name in ("distances", "frames", "keypoints", "goal_pixels", "goal_keypoints"):
+    for name in ("distances", "goal_ssim", "frames", "keypoints", "goal_pixels", "goal_keypoints"):
         np.testing.assert_array_equal(
             np.asarray(getattr(loaded, name)), np.asarray(getattr(result, name))
         )

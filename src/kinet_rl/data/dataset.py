@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from tensordict import TensorDict
+from tensordict import TensorDict, TensorDictBase
 
 from kinet_rl.data.storage import (
     COLLECT_HINT,
@@ -77,6 +77,8 @@ class PushDataset:
             :class:`DatasetMismatchError`.
     """
 
+    path: Path | None  # None for in-memory episodes (:meth:`from_episodes`)
+
     def __init__(
         self, path: str | Path, split: str = "train", expect: Mapping[str, Any] | None = None
     ) -> None:
@@ -109,10 +111,9 @@ class PushDataset:
         if split not in splits:
             raise ValueError(f"Unknown split {split!r}; {path} has {sorted(splits)}.")
         self.split = split
-        self.episode_length = metadata["episode_length"]
-        self.image_size = metadata["image_size"]
-        self.num_objects = metadata["num_objects"]
-        specs = episode_array_specs(self.episode_length, self.image_size, self.num_objects)
+        specs = episode_array_specs(
+            metadata["episode_length"], metadata["image_size"], metadata["num_objects"]
+        )
         check_array_files(path, metadata["num_episodes"], specs)
         try:
             stored = TensorDict.load_memmap(path / EPISODES_DIR)
@@ -121,15 +122,40 @@ class PushDataset:
                 f"Cannot open the arrays in {path / EPISODES_DIR} ({type(err).__name__}: {err}). "
                 f"Delete {path} and collect it again: {COLLECT_HINT}"
             ) from err
+        self._attach(stored, *splits[split])
+        if self.num_episodes < 1:
+            raise ValueError(f"Split {split!r} of {path} holds no episodes.")
+
+    @classmethod
+    def from_episodes(cls, episodes: TensorDictBase) -> PushDataset:
+        """A dataset of episodes held in memory, as one split ``"all"`` (no files, no metadata).
+
+        Args:
+            episodes: TensorDict [E] with the stored arrays' keys and shapes (see
+                :mod:`kinet_rl.data.storage`), e.g. stacked
+                :func:`~kinet_rl.data.collection.assemble_episode` outputs.
+        """
+        if episodes.batch_dims != 1 or episodes.shape[0] < 1:
+            raise ValueError(
+                f"episodes must be a TensorDict [E] with E >= 1, got {episodes.shape}."
+            )
+        dataset = cls.__new__(cls)
+        dataset.path, dataset.metadata, dataset.split = None, {}, ALL_SPLITS
+        dataset._attach(episodes, 0, episodes.shape[0])
+        return dataset
+
+    def _attach(self, stored: TensorDictBase, start: int, stop: int) -> None:
+        """Reads episodes ``start:stop`` of the stored arrays [E, ...]."""
+        self.episode_length = stored[ACTION].shape[1]
+        self.image_size = stored[PIXELS].shape[2]
+        self.num_objects = stored[OBJECT_POS].shape[2]
         # Row views of the memory maps, indexed with index_select: one row per frame or push
         # (about 9x faster than advanced indexing of the [E, T+1, H, W, 3] tensor).
         self._frames = _rows(stored[PIXELS])  # [E * (T+1), H * W * 3]
         self._actions = _rows(stored[ACTION])  # [E * T, 4]
         self._object_pos = _rows(stored[OBJECT_POS])  # [E * (T+1), N * 2]
-        self.episode_start, self.episode_stop = splits[split]
-        self.num_episodes = self.episode_stop - self.episode_start
-        if self.num_episodes < 1:
-            raise ValueError(f"Split {split!r} of {path} holds no episodes.")
+        self.episode_start, self.episode_stop = start, stop
+        self.num_episodes = stop - start
 
     def __len__(self) -> int:
         """Number of transitions in the split."""

@@ -75,6 +75,19 @@ def read_json(path: Path) -> dict[str, Any]:
     return record
 
 
+def stored_episodes(path: Path) -> tuple[int, bool]:
+    """Episodes the dataset folder ``path`` holds so far, and whether it is complete.
+
+    A complete dataset counts its recorded ``num_episodes``, a partial one its committed
+    episodes; a folder without either record holds 0.
+    """
+    if (path / METADATA_FILE).exists():
+        return int(read_json(path / METADATA_FILE)["num_episodes"]), True
+    if (path / PROGRESS_FILE).exists():
+        return int(read_json(path / PROGRESS_FILE)["committed"]), False
+    return 0, False
+
+
 def episode_array_specs(
     episode_length: int, image_size: int, num_objects: int
 ) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:

@@ -15,6 +15,8 @@ How an episode is made (seeded by its ``seed`` alone):
 Metrics come from the simulator's ground truth, in metres: the mean over objects of the
 distance between each object's centre and its own goal position, after every push (index 0 is
 the start), and success: every object within ``success_threshold`` of its goal at the end.
+Beside them, the metric a real robot can measure: the SSIM of the camera image to the goal
+image after every push (:func:`kinet_rl.evaluation.similarity.ssim`).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from kinet_rl.data.policy import RandomPushPolicy
 from kinet_rl.envs import make_dm_env
 from kinet_rl.envs.settings import SceneSettings
 from kinet_rl.envs.workspace import workspace_for
+from kinet_rl.evaluation.similarity import ssim
 from kinet_rl.keys import OBJECT_POS, PIXELS
 from kinet_rl.rearrangement.results import EpisodeResult
 from kinet_rl.rearrangement.settings import TaskSettings
@@ -58,6 +61,11 @@ def all_within(object_pos: np.ndarray, goal_pos: np.ndarray, threshold: float) -
     """Whether every object lies within ``threshold`` metres of its goal."""
     dist = np.linalg.norm(np.asarray(object_pos) - np.asarray(goal_pos), axis=-1)
     return bool((dist <= threshold).all())
+
+
+def goal_similarity(observation: dict[str, np.ndarray], episode: Episode) -> float:
+    """SSIM of the observation's camera image to the episode's goal image."""
+    return float(ssim(observation[PIXELS], episode.goal_pixels))
 
 
 def make_episode(scene: SceneSettings, task: TaskSettings, seed: int) -> Episode:
@@ -109,13 +117,15 @@ def run_episode(
 ) -> EpisodeResult:
     """Runs ``task.num_steps`` pushes of ``controller`` from the episode's start.
 
-    An unstable simulation ends the episode early; its last distance is carried to ``T``.
+    An unstable simulation ends the episode early; its last distance and SSIM are carried to
+    ``T``.
     With ``record`` the frames and (for KINet controllers) detected keypoints are kept. With
     ``observes`` the controller is handed only those observation entries (e.g. ``("pixels",)``:
     no ground truth reaches a controller that plans from images).
     """
     obs = episode.start
     distances = [mean_goal_distance(obs[OBJECT_POS], episode.goal_pos)]
+    similarities = [goal_similarity(obs, episode)]
     result = EpisodeResult(method, episode.seed, np.zeros(0), False, False)
     controller.reset(episode)
     for step in range(task.num_steps):
@@ -125,6 +135,7 @@ def run_episode(
             _record(result, controller, obs)
         obs = episode.env.step(action).observation
         distances.append(mean_goal_distance(obs[OBJECT_POS], episode.goal_pos))
+        similarities.append(goal_similarity(obs, episode))
         if on_step is not None:
             on_step(step)
         if episode.env.task.unstable:
@@ -136,8 +147,9 @@ def run_episode(
         push_planner = getattr(controller, "push_planner", None)
         if push_planner is not None and push_planner.last_goal_keypoints is not None:
             result.goal_keypoints = push_planner.last_goal_keypoints.numpy()
-    distances += [distances[-1]] * (task.num_steps + 1 - len(distances))
-    result.distances = np.asarray(distances, dtype=np.float64)
+    missing = task.num_steps + 1 - len(distances)
+    result.distances = np.asarray(distances + [distances[-1]] * missing, dtype=np.float64)
+    result.goal_ssim = np.asarray(similarities + [similarities[-1]] * missing, dtype=np.float64)
     result.success = all_within(obs[OBJECT_POS], episode.goal_pos, task.success_threshold)
     return result
 

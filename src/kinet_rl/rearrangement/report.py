@@ -50,18 +50,23 @@ def markdown(results: RearrangementResults, plot_name: str) -> str:
         f"every object within {task.success_threshold * 1e3:.0f} mm of its goal at T. "
         f"Mean ± 95% interval over episodes (Student's t; success: Wilson). "
         f"{settings.split.capitalize()} episodes, seeds {settings.first_seed} + i. "
-        f"Planner of every method: {budget_text(settings.planner)}.",
+        f"Planner of every method: {budget_text(settings.planner)}. "
+        "SSIM: structural similarity of the camera image to the goal image at T, which needs no "
+        "object state (the metric of a real robot); rho: Spearman's rank correlation of the SSIM "
+        "with the distance over every push of every episode (-1: it tracks the distance "
+        "perfectly).",
         "",
         f"![distance to goal]({plot_name})",
         "",
-        "| method | episodes | start [mm] | final [mm] | success |",
-        "|---|---|---|---|---|",
+        "| method | episodes | start [mm] | final [mm] | success | final SSIM | rho(SSIM, distance) |",
+        "|---|---|---|---|---|---|---|",
     ]
     for condition in results.conditions("comparison"):
         for method, stats in results.stats(condition).items():
             lines.append(
                 f"| {labels.get(method, method)} | {stats['episodes']} | "
-                f"{stats['initial_distance'] * 1e3:.1f} | {_final(stats)} | {success_text(stats)} |"
+                f"{stats['initial_distance'] * 1e3:.1f} | {_final(stats)} | {success_text(stats)} "
+                f"| {_number(stats['final_goal_ssim'])} | {_number(stats['goal_ssim_spearman'])} |"
             )
     kinet = labels.get(settings.kinet_method, settings.kinet_method)
     cells = {
@@ -103,6 +108,10 @@ def _final(stats: dict[str, Any] | None, with_start: bool = False) -> str:
         return "-"
     text = f"{stats['final_distance'] * 1e3:.1f} ± {stats['final_distance_ci95'] * 1e3:.1f}"
     return f"{text} ({stats['initial_distance'] * 1e3:.1f})" if with_start else text
+
+
+def _number(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3f}"
 
 
 def success_text(stats: Mapping[str, Any]) -> str:

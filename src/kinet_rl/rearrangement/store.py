@@ -49,6 +49,8 @@ def episode_arrays(result: EpisodeResult) -> dict[str, np.ndarray]:
         "success": np.array(result.success),
         "unstable": np.array(result.unstable),
     }
+    if result.goal_ssim is not None:
+        arrays["goal_ssim"] = np.asarray(result.goal_ssim)
     if result.frames:
         arrays["frames"] = np.stack(result.frames)
     if result.keypoints:
@@ -68,6 +70,7 @@ def episode_from_arrays(arrays: Mapping[str, np.ndarray]) -> EpisodeResult:
         distances=arrays["distances"],
         success=bool(arrays["success"]),
         unstable=bool(arrays["unstable"]),
+        goal_ssim=arrays.get("goal_ssim"),
         frames=list(arrays.get("frames", [])),
         keypoints=list(arrays.get("keypoints", [])),
         goal_pixels=arrays.get("goal_pixels"),

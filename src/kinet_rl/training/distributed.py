@@ -9,6 +9,8 @@ import torch
 import torch.distributed as dist
 from torch import nn
 
+from kinet_rl.devices import resolve_device
+
 
 @dataclass(frozen=True)
 class DistContext:
@@ -29,8 +31,7 @@ def init_distributed(device: str = "auto") -> DistContext:
     Args:
         device: ``"auto"`` (CUDA when available), ``"cpu"`` or ``"cuda"``.
     """
-    if device == "auto":
-        device = "cuda" if torch.cuda.is_available() else "cpu"
+    device = str(resolve_device(device))
     world_size = int(os.environ.get("WORLD_SIZE", "1"))
     if world_size == 1:
         return DistContext(device=torch.device(device))
@@ -44,6 +45,11 @@ def init_distributed(device: str = "auto") -> DistContext:
     if not dist.is_initialized():
         dist.init_process_group(backend="nccl" if dev.type == "cuda" else "gloo")
     return DistContext(rank=rank, world_size=world_size, device=dev)
+
+
+def process_rank() -> int:
+    """This process's rank under ``torchrun`` (0 outside it), readable before joining the group."""
+    return int(os.environ.get("RANK", "0"))
 
 
 def wrap_data_parallel(module: nn.Module, ctx: DistContext) -> nn.Module:
