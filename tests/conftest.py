@@ -1,4 +1,5 @@
-"""Shared fixtures: tiny untrained models, random images, the Hydra config folder, a full disk.
+"""Shared fixtures: tiny untrained models, random images and transitions, a trainer on a fixed
+batch, the Hydra config folder, a full disk.
 
 This file also puts ``tests/`` on ``sys.path`` (pytest's default ``prepend`` import mode inserts
 the folder of a rootdir-level ``conftest.py``), so the helper modules beside it
@@ -15,6 +16,7 @@ from typing import Any
 
 import pytest
 import torch
+from tensordict import TensorDict
 
 import kinet_rl.atomic
 from kinet_rl.baselines import (
@@ -25,7 +27,11 @@ from kinet_rl.baselines import (
     VisualInteractionModel,
 )
 from kinet_rl.configs import config_dir
-from kinet_rl.models import KINetWorldModel
+from kinet_rl.keys import ACTION, FUTURE_ACTION, FUTURE_PIXELS, PIXELS, PIXELS_0
+from kinet_rl.models import KINetLoss, KINetWorldModel
+from kinet_rl.training import TrainingCheckpoint
+from kinet_rl.training.loggers import make_logger
+from kinet_rl.training.loop import Trainer, TrainerSettings
 
 #: Constructor settings of the tiny KINet of the planning and rearrangement tests.
 TINY_KINET = {
@@ -101,6 +107,65 @@ def random_images() -> Callable[..., torch.Tensor]:
     def make(batch: tuple[int, ...], seed: int, size: int = 16) -> torch.Tensor:
         gen = torch.Generator().manual_seed(seed)
         return torch.randint(0, 256, (*batch, size, size, 3), generator=gen, dtype=torch.uint8)
+
+    return make
+
+
+@pytest.fixture
+def transition_batch(random_images: Callable[..., torch.Tensor]) -> Callable[..., TensorDict]:
+    """A random ``[batch]`` of 16 px transitions as ``PushDataset.sample(batch, horizon=3)``
+    draws them: ``I_0``, ``I_t``, the push, ``I_t+1`` and the two pushes and frames after it."""
+
+    def make(batch: int = 8, seed: int = 0) -> TensorDict:
+        frames = random_images((batch, 5), seed)
+        gen = torch.Generator().manual_seed(seed)
+        actions = torch.rand(batch, 3, 4, generator=gen) * 2 - 1
+        return TensorDict(
+            {
+                PIXELS_0: frames[:, 0],
+                PIXELS: frames[:, 1],
+                ACTION: actions[:, 0],
+                "next": {PIXELS: frames[:, 2]},
+                FUTURE_PIXELS: frames[:, 3:],
+                FUTURE_ACTION: actions[:, 1:],
+            },
+            batch_size=[batch],
+        )
+
+    return make
+
+
+class FixedBatch:
+    """A sampler that always draws the same batch."""
+
+    def __init__(self, batch: TensorDict) -> None:
+        self.batch = batch
+
+    def sample(self, batch_size: int, generator: Any = None, **options: Any) -> TensorDict:
+        assert batch_size == self.batch.shape[0]
+        return self.batch
+
+
+@pytest.fixture
+def kinet_trainer(
+    tmp_path: Path,
+    tiny_kinet: Callable[..., KINetWorldModel],
+    transition_batch: Callable[..., TensorDict],
+) -> Callable[..., Trainer]:
+    """``kinet_trainer(name, **settings)``: a Trainer of the tiny KINet (the same weights each
+    call) with the rollout loss, on one fixed ``transition_batch()``, in ``tmp_path / name``."""
+    batch = transition_batch()
+
+    def make(name: str, **settings: Any) -> Trainer:
+        data = FixedBatch(batch)
+        return Trainer(
+            KINetLoss(tiny_kinet(), rollout_weight=1.0),
+            data,
+            data,
+            TrainerSettings(batch_size=batch.shape[0], horizon=3, **settings),
+            TrainingCheckpoint(tmp_path / name, {"exp": "tiny kinet"}),
+            make_logger("csv", tmp_path / name, name),
+        )
 
     return make
 

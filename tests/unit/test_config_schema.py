@@ -127,6 +127,12 @@ REFUSED = {
     "trainer range": (["trainer.steps=-1"], "trainer.steps", "got -1, expected an integer of at"),
     "trainer unknown": (["+trainer.stepz=3"], "trainer.stepz", "did you mean steps?"),
     "trainer episode": (["env.max_steps=2"], "trainer.horizon", "at most env.max_steps=2"),
+    "trainer precision": (
+        ["trainer.precision=float16"],
+        "trainer.precision",
+        "got 'float16', expected one of ('float32', 'bfloat16')",
+    ),
+    "trainer compile": (["trainer.compile=maybe"], "trainer.compile", "expected true or false"),
     "trainer batch": (
         ["trainer.batch_size=30", "trainer.steps_per_episode=4"],
         "trainer.steps_per_episode",

@@ -10,6 +10,7 @@ import torch
 from kinet_rl.models.interaction import (
     KeypointInteractionNet,
     edge_geometry,
+    edge_layout,
     gaussian_kl_to_standard,
     graph_similarity,
 )
@@ -195,3 +196,21 @@ def test_a_learned_action_frame_starts_as_the_table_frame_and_learns():
     assert learned.action_to_image.weight.grad.abs().sum() > 0
     with pytest.raises(ValueError, match="action_frame='image'"):
         KeypointInteractionNet(action_frame="image")
+
+
+@pytest.mark.parametrize("k", [1, 2, 3, 6])
+def test_edge_layouts_store_each_directed_edge_once(k: int) -> None:
+    cpu = torch.device("cpu")
+    fast, full = edge_layout(k, True, cpu), edge_layout(k, False, cpu)
+    for receiver in range(k):  # the fast layout: every other node, in order; the full one: all
+        assert fast.senders[receiver].tolist() == [i for i in range(k) if i != receiver]
+        assert full.senders[receiver].tolist() == list(range(k))
+    assert fast.mask is None and full.mask is not None
+    assert torch.equal(full.mask, 1 - torch.eye(k))
+    for layout in (fast, full):
+        senders = layout.senders.flatten()
+        receivers = torch.arange(k).repeat_interleave(layout.senders.shape[1])
+        assert torch.equal(layout.matrix_index.flatten(), senders * k + receivers)
+        # an edge's reverse runs from its receiver to its sender
+        assert torch.equal(senders[layout.reverse.flatten()], receivers)
+        assert torch.equal(receivers[layout.reverse.flatten()], senders)

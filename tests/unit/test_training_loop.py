@@ -1,11 +1,14 @@
-"""Trainer: resumption gives the uninterrupted run, NaN, Ctrl-C and a full disk keep the checkpoint."""
+"""Trainer: resumption gives the uninterrupted run, NaN, Ctrl-C and a full disk keep the checkpoint;
+bfloat16 precision stays close to float32; a failing torch.compile falls back to eager."""
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 import torch
@@ -13,6 +16,7 @@ from tensordict import TensorDict
 from torch import nn
 
 from kinet_rl.atomic import CheckpointError, DiskFullError
+from kinet_rl.config_schema import ConfigError
 from kinet_rl.interrupts import Interrupted
 from kinet_rl.training import TrainingCheckpoint
 from kinet_rl.training.loggers import make_logger
@@ -64,11 +68,12 @@ def make_trainer(
     loss: nn.Module | None = None,
     seed: int = 0,
     train_data: LinearData | None = None,
+    **settings: Any,
 ) -> Trainer:
     torch.manual_seed(seed)
     settings = TrainerSettings(
         steps=steps, batch_size=8, lr=0.05, log_every=2, eval_every=4, checkpoint_every=2,
-        val_batches=2,
+        val_batches=2, **settings,
     )  # fmt: skip
     return Trainer(
         loss or RegressionLoss(),
@@ -162,3 +167,48 @@ def test_truncated_checkpoint_is_refused(tmp_path: Path) -> None:
     last.write_bytes(last.read_bytes()[:100])
     with pytest.raises(CheckpointError, match="corrupt or truncated"):
         make_trainer(tmp_path, steps=4).resume()
+
+
+def test_an_unknown_precision_is_refused() -> None:
+    with pytest.raises(ConfigError, match="precision: got 'float16', expected one of"):
+        TrainerSettings(precision="float16")
+
+
+def test_bfloat16_precision_gives_float32_losses_and_gradients_to_its_precision(
+    kinet_trainer: Callable[..., Trainer],
+) -> None:
+    steps = {}
+    for precision in ("float32", "bfloat16"):
+        trainer = kinet_trainer(precision, precision=precision)
+        torch.manual_seed(1)  # the same edge-sampling noise
+        losses = trainer.train_step()
+        grads = torch.cat([p.grad.flatten() for p in trainer.loss_module.parameters()])
+        steps[precision] = losses, grads
+    (exact, exact_grads), (mixed, mixed_grads) = steps["float32"], steps["bfloat16"]
+    assert set(mixed.keys()) == set(exact.keys()) and "loss_rollout" in exact
+    for name, value in mixed.items():
+        assert value.dtype == torch.float32, name
+        torch.testing.assert_close(value, exact[name], rtol=2e-2, atol=1e-6, msg=name)
+    error = ((mixed_grads - exact_grads).norm() / exact_grads.norm()).item()
+    assert 0 < error < 5e-2  # computed in bfloat16 (not bit-equal), yet the same gradient
+
+
+def test_a_failing_compile_warns_and_trains_eagerly(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    def failing_backend(graph: torch.fx.GraphModule, example_inputs: Any) -> Callable:
+        raise RuntimeError("no C++ compiler here")
+
+    compile_for_real = torch.compile
+    monkeypatch.setattr(
+        torch, "compile", lambda model: compile_for_real(model, backend=failing_backend)
+    )
+    with caplog.at_level(logging.WARNING, logger="kinet_rl.training.loop"):
+        compiled = make_trainer(tmp_path / "compiled", steps=8, compile=True)
+        compiled.fit()
+    assert "torch.compile of the loss failed" in caplog.text and "no C++ compiler" in caplog.text
+    assert compiled.compiled_loss is None  # compiled once, not at every step
+    eager = make_trainer(tmp_path / "eager", steps=8)
+    eager.fit()
+    for a, b in zip(compiled.loss_module.parameters(), eager.loss_module.parameters(), strict=True):
+        torch.testing.assert_close(a, b)

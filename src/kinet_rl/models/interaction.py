@@ -169,21 +169,37 @@ def _gather_rows(values: Tensor, index: Tensor) -> Tensor:
     return values.index_select(-2, index.flatten()).unflatten(-2, index.shape)
 
 
-@functools.lru_cache(maxsize=64)
 def edge_layout(num_nodes: int, fast: bool, device: torch.device) -> EdgeLayout:
-    """The :class:`EdgeLayout` of ``num_nodes`` nodes (fast: without self-loops) on ``device``."""
+    """The :class:`EdgeLayout` of ``num_nodes`` nodes (fast: without self-loops) on ``device``.
+
+    Cached per arguments; under ``torch.compile`` its construction is traced into the graph
+    instead (dynamo does not honour the cache).
+    """
+    if torch.compiler.is_compiling():
+        return _build_edge_layout(num_nodes, fast, device)
+    return _cached_edge_layout(num_nodes, fast, device)
+
+
+def _build_edge_layout(num_nodes: int, fast: bool, device: torch.device) -> EdgeLayout:
     k = num_nodes
     everyone = torch.arange(k, device=device)
-    senders = everyone.expand(k, k)  # [K, K]: every node sends to every node
+    receivers = everyone.unsqueeze(-1)  # [K, 1]
     if fast:
-        self_loop = torch.eye(k, dtype=torch.bool, device=device)
-        senders = senders[~self_loop].reshape(k, k - 1)
-    receivers = everyone.unsqueeze(-1).expand_as(senders)
+        # receiver k's senders are 0, ..., k - 1, k + 1, ..., K - 1; computed without boolean-mask
+        # indexing, whose data-dependent shape would break a torch.compile graph
+        slots = torch.arange(k - 1, device=device)
+        senders = slots + (slots >= receivers).long()  # [K, K - 1]
+    else:
+        senders = everyone.expand(k, k)  # [K, K]: every node sends to every node
+    receivers = receivers.expand_as(senders)
     slot = torch.full((k, k), -1, dtype=torch.long, device=device)  # [receiver, sender] -> slot
     slot[receivers, senders] = torch.arange(senders.shape[1], device=device).expand_as(senders)
     reverse = senders * senders.shape[1] + slot[senders, receivers]
     mask = None if fast else (senders != receivers).float()
     return EdgeLayout(fast, senders, senders * k + receivers, reverse, mask)
+
+
+_cached_edge_layout = functools.lru_cache(maxsize=64)(_build_edge_layout)
 
 
 #: Size of :func:`push_features`: the push and its two points relative to a node.

@@ -180,7 +180,7 @@ class KINetWorldModel(ConfigCheckpointMixin, KeypointWorldModel):
         batch = first.shape[0]
         # I_0 and I_t+1 in one pass without gradient: I_t+1 is only a forward-model target
         # (detached anyway, paper Sec. 3.5); dropping the gradient through I_0's features made
-        # a training step ~1.2x faster and learnt as well (bench/train_throughput.py and
+        # a training step ~1.2x faster and learnt as well (docs/kinet.md, "Training speed", and
         # tests/integration/test_models_learning.py, 3 seeds). The detector learns from I_t.
         with torch.no_grad():
             source, following_enc = self.detector.encode(torch.cat([first, following])).split(batch)
