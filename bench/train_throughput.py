@@ -7,7 +7,7 @@ Every variant trains the default KINet (default sizes) with the default experime
 each transition, ``trainer.horizon=3``) and gradient clipping at 10, on the same batch each
 round, drawn from in-memory uint8 frames ``[E, T+1, H, W, 3]`` (the loader is timed by
 ``loader_throughput.py``). kinet_rl's step is ``Trainer.train_step``: ``KINetLoss``, backward,
-clipping, fused Adam. The bare loop gathers plain tensors and calls the detector, reconstructor
+clipping, Adam. The bare loop gathers plain tensors and calls the detector, reconstructor
 and interaction net directly with the losses written inline (no TensorDict, no LossModule, the
 textbook ``torch.optim.Adam``). Variants of the Trainer's step:
 
