@@ -46,14 +46,14 @@ def main() -> None:
     task_log.addHandler(Record())
     task_log.propagate = False
     blocked = collections.Counter()
-    original = PushObjects._pusher_blocked
+    original = PushObjects._hold_pusher_and_check_blocked
 
     def counting(self, physics, target):
         result = original(self, physics, target)
         blocked[result] += 1
         return result
 
-    PushObjects._pusher_blocked = counting
+    PushObjects._hold_pusher_and_check_blocked = counting
     seen, discarded, outside = collections.Counter(), collections.Counter(), 0
     view = CAMERA_FRAMINGS["ycb"].top_view + 0.03
     start = time.perf_counter()

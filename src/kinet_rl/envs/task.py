@@ -308,7 +308,9 @@ class PushObjects(base.Task):
         above_start, (lower, push, lift) = self.push_plan(action)
         self._place_pusher(physics, above_start)
         self._move_pusher(physics, *lower)
-        if self.settings.retract_when_blocked and self._pusher_blocked(physics, lower[0]):
+        if self.settings.retract_when_blocked and self._hold_pusher_and_check_blocked(
+            physics, lower[0]
+        ):
             self._move_pusher(physics, above_start, lift[1])
         else:
             self._move_pusher(physics, *push)
@@ -331,7 +333,7 @@ class PushObjects(base.Task):
         data.act[act_ids] = xyz
         data.ctrl[:] = 0.0
 
-    def _pusher_blocked(self, physics: PushPhysics, target: np.ndarray) -> bool:
+    def _hold_pusher_and_check_blocked(self, physics: PushPhysics, target: np.ndarray) -> bool:
         """Holds the pusher still, then whether an object stopped it short of ``target``."""
         mujoco.mj_step(physics.model.ptr, physics.data.ptr, nstep=BLOCKED_HOLD_STEPS)
         position = physics.data.ptr.qpos[self._pusher[0]]
