@@ -57,10 +57,12 @@ DATASET_ENV_KEYS = ("task", "camera", "image_size", "num_objects")
 #: File name of a trained model in its run directory.
 KINET_FILE, BASELINE_FILE = "kinet.pt", "model.pt"
 #: Top-level keys of the root config (``conf/config.yaml``); ``checkpoint`` is read by
-#: ``kinet_rl.evaluate``, ``estimate`` by ``kinet_rl.train``.
+#: ``kinet_rl.evaluate``, ``estimate`` by ``kinet_rl.train``; ``keypoints`` is interpolated by the
+#: keypoint models' configs (``conf/model/kinet.yaml``, ``vcdn.yaml``).
 ROOT_KEYS = (
     "exp_name",
     "seed",
+    "keypoints",
     "device",
     "estimate",
     "checkpoint",

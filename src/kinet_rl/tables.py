@@ -1,8 +1,8 @@
 """Train and evaluate every row of the comparison tables: ``python -m kinet_rl.tables [tables=paper]``.
 
 For each model (KINet, its ablations and the baselines) and camera, the row's config is the root
-config composed with the experiment ``+exp=blocks_<camera>view<suffix>`` and the scale's
-overrides (``conf/tables/<scale>.yaml``); the row is trained with
+config composed with the experiment ``+exp=<task>_<camera>view<suffix>`` (task ``blocks`` or
+``ycb``) and the scale's overrides (``conf/tables/<scale>.yaml``); the row is trained with
 :func:`kinet_rl.pipeline.run_experiment` in ``<out>/<exp_name>`` and then evaluated the same way
 as every other row:
 
@@ -75,7 +75,7 @@ from kinet_rl.rearrangement.report import budget_text
 
 logger = logging.getLogger(__name__)
 
-#: Experiment-name suffix of each row model (``conf/exp/blocks_<camera>view<suffix>.yaml``).
+#: Experiment-name suffix of each row model (``conf/exp/<task>_<camera>view<suffix>.yaml``).
 EXPERIMENT_SUFFIX = {
     "kinet": "",
     "kinet_determ": "_determ",
@@ -87,6 +87,8 @@ EXPERIMENT_SUFFIX = {
     "vcdn": "_vcdn",
 }
 CAMERAS = ("top", "side")
+#: The tables' scenes: ``task`` of the rows' experiments, and how the tables name it.
+TASKS = {"blocks": "BlockObjs", "ycb": "YCBObjs"}
 #: What a planner budget's name may be (it is part of file names, e.g. ``tables_mpc_64x3.json``).
 BUDGET_NAME = re.compile(r"[\w.-]+")
 
@@ -112,6 +114,7 @@ class TablesSettings:
     forward_sequences: int
     mpc_budgets: Mapping[str, Mapping[str, Any]]
     overrides: tuple[str, ...] = ()
+    task: str = "blocks"
     model_overrides: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
     eval: Mapping[str, Any] = field(default_factory=dict)
 
@@ -130,6 +133,7 @@ class TablesSettings:
                 f"{'a non-empty list' if least else 'a list'} of names from {list(choices)}",
             )
         require(self.mpc_camera in self.cameras, "mpc_camera", self.mpc_camera, "one of cameras")
+        require(self.task in TASKS, "task", self.task, f"one of {list(TASKS)}")
         for name, low in (("seeds", 0), ("forward_horizons", 1)):
             values = list(getattr(self, name))
             require(
@@ -160,19 +164,19 @@ class TablesSettings:
         return settings_from(cls, values, "tables")
 
 
-def experiment_name(model: str, camera: str) -> str:
+def experiment_name(model: str, camera: str, task: str = "blocks") -> str:
     """The experiment of a table row, e.g. ``blocks_topview_determ``."""
-    if model not in EXPERIMENT_SUFFIX or camera not in CAMERAS:
+    if model not in EXPERIMENT_SUFFIX or camera not in CAMERAS or task not in TASKS:
         raise ValueError(
-            f"Unknown row ({model!r}, {camera!r}); models: {sorted(EXPERIMENT_SUFFIX)}, cameras: "
-            f"{list(CAMERAS)}. Fix conf/tables/<scale>.yaml."
+            f"Unknown row ({task!r}, {model!r}, {camera!r}); tasks: {list(TASKS)}, models: "
+            f"{sorted(EXPERIMENT_SUFFIX)}, cameras: {list(CAMERAS)}. Fix conf/tables/<scale>.yaml."
         )
-    return f"blocks_{camera}view{EXPERIMENT_SUFFIX[model]}"
+    return f"{task}_{camera}view{EXPERIMENT_SUFFIX[model]}"
 
 
 def row_config(tables: TablesSettings, model: str, camera: str, seed: int = 0) -> DictConfig:
     """The composed training config of a row and training seed (needs an initialised Hydra)."""
-    exp = experiment_name(model, camera)
+    exp = experiment_name(model, camera, tables.task)
     extra = [o.replace("{camera}", camera) for o in tables.overrides]
     extra += list(tables.model_overrides.get(model, []))
     extra += [f"seed={seed}", f"trainer.seed={seed}"]
@@ -374,7 +378,7 @@ def _build_tables(tables: TablesSettings, out_dir: Path) -> Path:
         row = run_row(tables, model, camera, out_dir, seed)
         forward.setdefault(model, {}).setdefault(camera, []).append(row["forward"])
         run_dirs.setdefault(camera, {}).setdefault(LABELS.get(model, model), []).append(
-            run_dir_of(out_dir, experiment_name(model, camera), seed)
+            run_dir_of(out_dir, experiment_name(model, camera, tables.task), seed)
         )
         for budget, by_condition in row["mpc"].items():
             mpc[budget][model] = by_condition["comparison"]
@@ -413,12 +417,12 @@ def _build_tables(tables: TablesSettings, out_dir: Path) -> Path:
             f"# KINet comparison tables ({tables.scale} scale)",
             "",
             f"Command: `python -m kinet_rl.tables tables={tables.scale}`; row configs: "
-            "`+exp=blocks_<camera>view<suffix>` with the overrides of "
+            f"`+exp={tables.task}_<camera>view<suffix>` with the overrides of "
             f"`conf/tables/{tables.scale}.yaml`; training seeds {seeds}, test sequences seed 0, "
             f"rearrangement: {settings.split} episodes, seeds {settings.first_seed} + i (the same "
             f"episodes for every row; MPC with the models of seed {seeds[0]}).",
             "",
-            "## Table I: single-step forward error (BlockObjs, 3 objects)",
+            f"## Table I: single-step forward error ({TASKS[tables.task]}, 3 objects)",
             "",
             "Mean object-position error on the table after one push, mm: the mean over the same "
             f"{tables.forward_sequences} held-out test sequences (start frame only, logged push) "

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -51,9 +52,9 @@ def test_oracle_mpc_beats_random_pushes_in_the_simulator() -> None:
         for method in finals:
             episode = make_episode(SCENE, task, seed)
             controller = (
-                OracleController(SCENE, ORACLE, 0.035, seed)
+                OracleController(SCENE, ORACLE, 0.035, [seed])
                 if method == "oracle"
-                else RandomController(seed)
+                else RandomController([seed])
             )
             result = run_episode(episode, controller, method, task)
             episode.close()
@@ -107,7 +108,7 @@ def test_evaluate_rearrangement_writes_plot_markdown_json_and_video_and_resumes(
     # A rerun (as after an interruption) takes every finished episode from the store.
     episodes = sum(stats["episodes"] for cell in summary.values() for stats in cell.values())
     assert len(list((tmp_path / "episodes").rglob("*.npz"))) == episodes
-    monkeypatch.setattr(runner, "run_job", None)  # no episode may run again
+    monkeypatch.setattr(runner, "run_jobs", None)  # no episode may run again
     (tmp_path / f"rearrangement_seed{settings.first_seed}.gif").unlink()
     assert evaluate_rearrangement(tiny_kinet(), settings, tmp_path, True)["summary"] == summary
     assert (iio.imread(tmp_path / f"rearrangement_seed{settings.first_seed}.gif") == video).all()
@@ -177,12 +178,12 @@ def test_image_controllers_are_never_handed_ground_truth(monkeypatch, tiny_kinet
     from kinet_rl.keys import OBJECT_POS, PIXELS
     from kinet_rl.rearrangement.controllers import KINetController
     from kinet_rl.rearrangement.methods import METHODS
-    from kinet_rl.rearrangement.runner import Job, run_job
+    from kinet_rl.rearrangement.runner import Job, run_jobs
 
     seen: list[set[str]] = []
     act = KINetController.act
     monkeypatch.setattr(
-        KINetController, "act", lambda self, obs: seen.append(set(obs)) or act(self, obs)
+        KINetController, "act", lambda self, obs: seen.extend(map(set, obs)) or act(self, obs)
     )
     settings = RearrangementSettings(
         scene=SceneSettings(image_size=32), task=TaskSettings(num_steps=2), workers=1, videos=0,
@@ -191,6 +192,29 @@ def test_image_controllers_are_never_handed_ground_truth(monkeypatch, tiny_kinet
     condition = settings.conditions(generalization=False)[0]
     kinet_methods = [name for name, method in METHODS.items() if method.needs == "kinet"]
     for name in kinet_methods:
-        run_job(Job(condition, name, 10_000, False), settings, tiny_kinet())
+        run_jobs([Job(condition, name, 10_000, False)], settings, tiny_kinet())
     assert seen == [{PIXELS}] * (2 * len(kinet_methods))
     assert METHODS["oracle"].observes == (OBJECT_POS,) and METHODS["random"].observes == ()
+
+
+def test_batched_episodes_run_as_they_do_one_at_a_time(tiny_kinet) -> None:
+    """Three episodes in lockstep (one batched plan per step) push as each does alone."""
+    from kinet_rl.rearrangement.runner import run_rearrangement
+
+    settings = RearrangementSettings(
+        scene=SCENE, task=TaskSettings(num_steps=4), episodes=3, workers=1, videos=1,
+        methods=("kinet_keypoints_l2", "oracle", "random"),
+        planner={"planning_horizon": 1, "optim_steps": 2, "num_candidates": 16, "top_k": 4},
+    )  # fmt: skip
+    model = tiny_kinet()
+    alone = run_rearrangement(model, settings).episodes
+    together = run_rearrangement(model, replace(settings, batch_episodes=3)).episodes
+    for condition, by_method in alone.items():
+        for method, results in by_method.items():
+            for one, batched in zip(results, together[condition][method], strict=True):
+                assert one.seed == batched.seed
+                np.testing.assert_allclose(batched.distances, one.distances, atol=1e-6)
+                assert len(batched.frames) == len(one.frames)  # the recorded video, too
+    (comparison,) = alone.values()
+    finals = {m: [r.distances[-1] for r in rs] for m, rs in comparison.items()}
+    assert len(set(finals["random"])) == 3  # the episodes differ: the test compares something

@@ -120,13 +120,13 @@ def test_in_env_planning_improves_the_goal_reward_over_random_actions(tiny_basel
 @pytest.mark.parametrize("name", ["forw", "forwinv", "in", "visin", "vcdn"])
 def test_controller_acts_in_bounds_through_the_method_registry(name: str, tiny_baseline) -> None:
     settings = RearrangementSettings(methods=("model_mpc",), planner=PLANNER)
-    context = MethodContext(tiny_baseline(name), SceneSettings(image_size=SIZE), settings, 0)
+    context = MethodContext(tiny_baseline(name), SceneSettings(image_size=SIZE), settings, (0,))
     controller = METHODS["model_mpc"].make_controller(context)
     assert isinstance(controller, BaselineMPCController)
     goal = observation(1)
-    controller.reset(SimpleNamespace(goal_pos=goal["object_pos"], goal_pixels=goal["pixels"]))
-    action = controller.act(observation(0))
-    assert action.shape == (4,) and np.isfinite(action).all()
+    controller.reset([SimpleNamespace(goal_pos=goal["object_pos"], goal_pixels=goal["pixels"])])
+    action = controller.act([observation(0)])
+    assert action.shape == (1, 4) and np.isfinite(action).all()
     assert np.abs(action).max() <= 1.0
 
 
@@ -140,6 +140,6 @@ def test_wrong_model_kinds_are_refused_with_a_clear_error(tiny_baseline, tmp_pat
     with pytest.raises(ValueError, match="need a model"):
         evaluate_rearrangement(None, settings, tmp_path / "unused")
     assert not (tmp_path / "unused").exists()  # refused before anything is written
-    controller = BaselineMPCController(tiny_baseline("in"), PLANNER, 0)
+    controller = BaselineMPCController(tiny_baseline("in"), PLANNER, (0,))
     with pytest.raises(RuntimeError, match="reset"):
-        controller.act(observation(0))
+        controller.act([observation(0)])

@@ -56,3 +56,16 @@ def test_bad_images_are_reported(tiny_kinet, random_images) -> None:
         planner.next_push(torch.zeros(16, 16, 3), random_images((), 1))
     with pytest.raises(ValueError, match="workspace_half_size"):
         PushPlanner(tiny_kinet(), 0.0)
+
+
+def test_next_pushes_plans_each_scene_as_its_own_seeded_planner(tiny_kinet, random_images) -> None:
+    model = tiny_kinet()
+    images, goals = random_images((3,), 0), random_images((3,), 1)
+    together = PushPlanner(model, 0.2, seed=(4, 5, 6), **PLANNER).next_pushes(images, goals)
+    for i, seed in enumerate((4, 5, 6)):
+        alone = PushPlanner(model, 0.2, seed=(seed,), **PLANNER)
+        (push,) = alone.next_pushes(images[i : i + 1], goals[i : i + 1])
+        assert push.normalised == pytest.approx(together[i].normalised, abs=1e-5)
+    assert len({push.normalised for push in together}) == 3  # different scenes, different pushes
+    with pytest.raises(ValueError, match="next_push for one image"):
+        PushPlanner(model, 0.2, **PLANNER).next_pushes(images[0], goals[0])

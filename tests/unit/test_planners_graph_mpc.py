@@ -270,3 +270,18 @@ def test_best_sequence_avoids_averaging_two_modes(options):
 def test_keep_elites_must_fit_the_candidates():
     with pytest.raises(ValueError, match=r"keep_elites: got .*, expected an integer in \[0, min"):
         GraphMPCPlanner(_bimodal_env(), num_candidates=8, top_k=4, keep_elites=5)
+
+
+def test_one_generator_per_element_plans_a_batch_as_each_alone() -> None:
+    """Batched evaluation: element i of a batch samples what a planner seeded with seed i would."""
+    env = QuadraticModelEnv(GOAL)
+    starts = torch.tensor([[[0.0, 0.0]], [[2.5, 0.5]], [[3.5, -1.5]]])  # [3, K=1, 2]
+    seeds = (11, 12, 13)
+    batched = _planner(env, generator=[torch.Generator().manual_seed(s) for s in seeds])
+    together = batched(TensorDict({KP_POS: starts}, batch_size=[3]))[ACTION]
+    for i, seed in enumerate(seeds):
+        alone = _planner(env, generator=[torch.Generator().manual_seed(seed)])
+        single = alone(TensorDict({KP_POS: starts[i : i + 1]}, batch_size=[1]))[ACTION]
+        torch.testing.assert_close(together[i], single[0])
+    with pytest.raises(ValueError, match="3 generators"):
+        batched(TensorDict({KP_POS: starts[:2]}, batch_size=[2]))

@@ -53,12 +53,12 @@ def test_models_that_cannot_plan_a_method_are_reported(tiny_kinet) -> None:
 
 def test_a_controller_is_refused_for_the_wrong_model(tiny_kinet, tiny_baseline) -> None:
     settings = RearrangementSettings()
-    context = MethodContext(tiny_baseline("in"), SceneSettings(), settings, seed=0)
+    context = MethodContext(tiny_baseline("in"), SceneSettings(), settings, seeds=(0,))
     with pytest.raises(TypeError, match="plans with KINet"):
         METHODS["kinet_graph_distance"].controller(context)
     with pytest.raises(ValueError, match="need a model"):
-        METHODS["kinet_graph"].controller(MethodContext(None, SceneSettings(), settings, 0))
-    assert METHODS["random"].controller(MethodContext(None, SceneSettings(), settings, 0))
+        METHODS["kinet_graph"].controller(MethodContext(None, SceneSettings(), settings, (0,)))
+    assert METHODS["random"].controller(MethodContext(None, SceneSettings(), settings, (0,)))
     check_model(RearrangementSettings(methods=("model_mpc",)).conditions(), tiny_baseline("in"))
 
 

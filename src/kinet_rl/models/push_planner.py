@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -62,7 +63,8 @@ class PushPlanner:
     Wraps a :class:`GraphMPCPlanner` over a :class:`KINetModelEnv`; the planner's warm start
     (its previous plan shifted by one) is kept between calls and cleared when the goal image
     changes or :meth:`reset` is called. Images must come from the camera, view and resolution
-    the model was trained on.
+    the model was trained on. :meth:`next_pushes` plans for several scenes at once (one batched
+    planner call; each scene keeps its own warm start).
 
     Example:
         >>> planner = PushPlanner(KINetWorldModel.from_checkpoint("runs/x/kinet.pt"), 0.20)
@@ -74,7 +76,9 @@ class PushPlanner:
         workspace_half_size: Half the side of the square workspace, metres (0.20 blocks, 0.30 YCB).
         reward: The planning objective (default :class:`GraphDistanceReward`, GraphMPC on the
             node-embedding distance); see :class:`KINetModelEnv`.
-        seed: Seeds the planner's sampling for reproducible pushes (None: global torch RNG).
+        seed: Seeds the planner's sampling for reproducible pushes (None: global torch RNG); a
+            sequence of seeds, one per scene of :meth:`next_pushes`, samples for each scene what
+            a planner seeded with its seed alone would.
         **planner_kwargs: :class:`GraphMPCPlanner` settings (``planning_horizon``, ...).
     """
 
@@ -83,19 +87,20 @@ class PushPlanner:
         model: KINetWorldModel,
         workspace_half_size: float,
         reward: KINetReward | None = None,
-        seed: int | None = None,
+        seed: int | Sequence[int] | None = None,
         **planner_kwargs: Any,
     ) -> None:
         if not workspace_half_size > 0:
             raise ValueError(f"workspace_half_size must be > 0 metres, got {workspace_half_size}.")
         model.eval()
         self.env = KINetModelEnv(model, GraphDistanceReward() if reward is None else reward)
-        generator = None if seed is None else torch.Generator(self.env.device).manual_seed(seed)
-        self.planner = GraphMPCPlanner(self.env, generator=generator, **planner_kwargs)
+        self.planner = GraphMPCPlanner(
+            self.env, generator=seeded_generators(seed, self.env.device), **planner_kwargs
+        )
         self.workspace_half_size = float(workspace_half_size)
         self._goal: Tensor | None = None
-        self.last_keypoints: Tensor | None = None  # [K, 2] detected in the last image
-        self.last_goal_keypoints: Tensor | None = None  # [K, 2] detected in the goal image
+        self.last_keypoints: Tensor | None = None  # [*B, K, 2] detected in the last image(s)
+        self.last_goal_keypoints: Tensor | None = None  # [*B, K, 2] detected in the goal image(s)
 
     def reset(self) -> None:
         """Forgets the warm-start plan (call at the start of a new task)."""
@@ -105,19 +110,46 @@ class PushPlanner:
         """The next push for the current ``image`` and the ``goal_image`` (both uint8 ``[H, W, 3]``)."""
         image = as_image_tensor(image, "image")
         goal = as_image_tensor(goal_image, "goal_image")
-        if self._goal is None or not torch.equal(self._goal, goal):
+        return self._plan(image, goal)[0]
+
+    def next_pushes(self, images: Tensor, goal_images: Tensor) -> list[Push]:
+        """The next push of each scene: ``images`` and ``goal_images`` uint8 ``[B, H, W, 3]``."""
+        for name, batch in (("images", images), ("goal_images", goal_images)):
+            if batch.dim() != 4:
+                raise ValueError(
+                    f"{name} must be a batch of RGB images [B, H, W, 3], got shape "
+                    f"{tuple(batch.shape)}; use next_push for one image."
+                )
+            as_image_tensor(batch[0], name)
+        return self._plan(images, goal_images)
+
+    def _plan(self, images: Tensor, goals: Tensor) -> list[Push]:
+        if self._goal is None or not torch.equal(self._goal, goals):
             if self._goal is not None:
                 logger.info("PushPlanner: new goal image; warm start cleared.")
             self.planner.reset()
-            self._goal = goal.clone()
-        state = self.env.observe(image, goal)
+            self._goal = goals.clone()
+        state = self.env.observe(images, goals)
         self.last_keypoints = state.get(KP_POS).cpu()
         self.last_goal_keypoints = state.get(GOAL_KP_POS).cpu()
-        action = self.planner(state).get(ACTION).cpu().double()
-        action = action.clamp(-1.0, 1.0)
+        actions = self.planner(state).get(ACTION).cpu().double().clamp(-1.0, 1.0)
+        return [self._push(action) for action in actions.reshape(-1, 4)]
+
+    def _push(self, action: Tensor) -> Push:
         metres = (action * self.workspace_half_size).tolist()
         return Push(
             start_xy_m=(metres[0], metres[1]),
             end_xy_m=(metres[2], metres[3]),
             normalised=tuple(action.tolist()),  # type: ignore[arg-type]
         )
+
+
+def seeded_generators(
+    seed: int | Sequence[int] | None, device: torch.device | str = "cpu"
+) -> torch.Generator | list[torch.Generator] | None:
+    """A planner's ``generator`` argument: None, one seeded generator, or one per seed."""
+    if seed is None:
+        return None
+    if isinstance(seed, int):
+        return torch.Generator(device).manual_seed(seed)
+    return [torch.Generator(device).manual_seed(s) for s in seed]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import torch
@@ -52,7 +52,9 @@ class GraphMPCPlanner(MPCPlannerBase):
     batch shape clears it entirely. Sampled actions are clamped to the action spec bounds.
 
     Random numbers come from ``generator`` when given, else from the global torch RNG, so a
-    fixed ``torch.manual_seed`` gives the same plan.
+    fixed ``torch.manual_seed`` gives the same plan. A sequence of generators, one per element of
+    the first batch dim, draws each element's samples from its own generator: a batch of episodes
+    planned in one call then samples exactly what each would alone (batched evaluation).
 
     Reference: KINet, Rezazadeh et al., RA-L 2023 (GraphMPC, Sec. 3.4); TD-MPC2, Hansen et al.,
     ICLR 2024 (MPPI update, warm start).
@@ -78,7 +80,7 @@ class GraphMPCPlanner(MPCPlannerBase):
         keep_elites: Elites carried into the next iteration's candidates (0: none).
         reward_key: Reward read after each imagined step.
         action_key: Where the planned action is written.
-        generator: Optional RNG for sampling.
+        generator: Optional RNG for sampling, or one per element of the first batch dim.
     """
 
     def __init__(
@@ -97,7 +99,7 @@ class GraphMPCPlanner(MPCPlannerBase):
         keep_elites: int = 0,
         reward_key: NestedKey = REWARD,
         action_key: NestedKey = ACTION,
-        generator: torch.Generator | None = None,
+        generator: torch.Generator | Sequence[torch.Generator] | None = None,
     ) -> None:
         _check_arguments(
             planning_horizon=planning_horizon,
@@ -161,12 +163,7 @@ class GraphMPCPlanner(MPCPlannerBase):
         best_return = torch.full(batch_shape, -math.inf, device=mean.device, dtype=mean.dtype)
         best = mean.squeeze(dim)  # [*B, T, *A] best sequence scored (return_best only)
         for _ in range(self.optim_steps):
-            noise = torch.randn(
-                (*batch_shape, self.num_candidates, *mean.shape[-n_event:]),
-                generator=self.generator,
-                device=mean.device,
-                dtype=mean.dtype,
-            )
+            noise = self._noise((*batch_shape, self.num_candidates, *mean.shape[-n_event:]), mean)
             actions = self._clamp(mean + std * noise)  # [*B, N, T, *A]
             if kept is not None:
                 actions = torch.cat(
@@ -250,6 +247,25 @@ class GraphMPCPlanner(MPCPlannerBase):
             if is_init is not None:
                 mean = torch.where(self._plan_mask(is_init, batch_shape), centre, mean)
         return mean.unsqueeze(len(batch_shape))
+
+    def _noise(self, shape: tuple[int, ...], like: Tensor) -> Tensor:
+        """Standard normal samples of ``shape``, from the generator(s) (see the class docstring)."""
+        generators = self.generator
+        if generators is None or isinstance(generators, torch.Generator):
+            return torch.randn(shape, generator=generators, device=like.device, dtype=like.dtype)
+        batch = shape[: len(shape) - 2 - len(self._action_shape)]
+        if not batch or batch[0] != len(generators):
+            raise ValueError(
+                f"GraphMPCPlanner has {len(generators)} generators (one per element of the first "
+                f"batch dim) but was called with batch {tuple(batch)}; plan a batch of "
+                f"{len(generators)} or pass one generator."
+            )
+        return torch.stack(
+            [
+                torch.randn(shape[1:], generator=g, device=like.device, dtype=like.dtype)
+                for g in generators
+            ]
+        )
 
     def _plan_mask(self, mask: Tensor, batch_shape: torch.Size) -> Tensor:
         """Reduces a ``[*B]`` or ``[*B, 1]`` flag to ``[*B, 1, ...]`` broadcastable to a plan."""

@@ -13,7 +13,13 @@ from kinet_rl.rearrangement.controllers import (
     OracleController,
     RandomController,
 )
-from kinet_rl.rearrangement.episodes import Controller, Episode, make_episode, run_episode
+from kinet_rl.rearrangement.episodes import (
+    Controller,
+    Episode,
+    make_episode,
+    run_episode,
+    run_episodes,
+)
 from kinet_rl.rearrangement.methods import METHODS, Method, MethodContext
 from kinet_rl.rearrangement.report import write_report
 from kinet_rl.rearrangement.results import EpisodeResult, RearrangementResults, summarize
@@ -43,6 +49,7 @@ __all__ = [
     "generalization_key",
     "make_episode",
     "run_episode",
+    "run_episodes",
     "run_rearrangement",
     "summarize",
     "write_report",

@@ -21,7 +21,7 @@ image after every push (:func:`kinet_rl.evaluation.similarity.ssim`).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -97,13 +97,69 @@ def make_episode(scene: SceneSettings, task: TaskSettings, seed: int) -> Episode
 
 
 class Controller(Protocol):
-    """Chooses pushes for an episode."""
+    """Chooses the pushes of a batch of episodes (:mod:`kinet_rl.rearrangement.controllers`)."""
 
-    def reset(self, episode: Episode) -> None:
-        """Called once before the first push."""
+    def reset(self, episodes: Sequence[Episode]) -> None:
+        """Called once before the first push, with the episodes it plans for."""
 
-    def act(self, observation: dict[str, np.ndarray]) -> np.ndarray:
-        """The next push, ``[4]`` in ``[-1, 1]``, from the env's observation dict."""
+    def act(self, observations: Sequence[dict[str, np.ndarray]]) -> np.ndarray:
+        """The next push of each episode, ``[B, 4]`` in ``[-1, 1]``, from the env observations."""
+
+
+def run_episodes(
+    episodes: Sequence[Episode],
+    controller: Controller,
+    method: str,
+    task: TaskSettings,
+    record: Sequence[bool] | None = None,
+    observes: tuple[str, ...] | None = None,
+) -> list[EpisodeResult]:
+    """Runs ``task.num_steps`` pushes of ``controller`` on every episode, in lockstep.
+
+    At each step the controller is asked once for the pushes of all episodes (one batched plan),
+    then each episode's simulator takes its push. An unstable simulation ends its episode early
+    (its last distance and SSIM are carried to ``T``); the controller keeps planning for it on
+    its last observation, so that the others' plans and warm starts are those they would have alone.
+    Episodes flagged in ``record`` keep their frames and (for KINet controllers) detected
+    keypoints. With ``observes`` the controller is handed only those observation entries (e.g.
+    ``("pixels",)``: no ground truth reaches a controller that plans from images).
+    """
+    record = [False] * len(episodes) if record is None else list(record)
+    if len(record) != len(episodes):
+        raise ValueError(f"record has {len(record)} flags for {len(episodes)} episodes.")
+    obs = [episode.start for episode in episodes]
+    distances = [
+        [mean_goal_distance(o[OBJECT_POS], e.goal_pos)] for o, e in zip(obs, episodes, strict=True)
+    ]
+    similarities = [[goal_similarity(o, e)] for o, e in zip(obs, episodes, strict=True)]
+    results = [EpisodeResult(method, e.seed, np.zeros(0), False, False) for e in episodes]
+    controller.reset(episodes)
+    for _ in range(task.num_steps):
+        live = [i for i, result in enumerate(results) if not result.unstable]
+        if not live:
+            break
+        seen = [o if observes is None else {key: o[key] for key in observes} for o in obs]
+        actions = np.clip(np.asarray(controller.act(seen), dtype=np.float32), -1.0, 1.0)
+        for i in live:
+            episode = episodes[i]
+            if record[i]:
+                _record(results[i], controller, obs[i], i)
+            obs[i] = episode.env.step(actions[i]).observation
+            distances[i].append(mean_goal_distance(obs[i][OBJECT_POS], episode.goal_pos))
+            similarities[i].append(goal_similarity(obs[i], episode))
+            results[i].unstable = bool(episode.env.task.unstable)
+    for i, (episode, result) in enumerate(zip(episodes, results, strict=True)):
+        if record[i]:
+            result.frames.append(obs[i][PIXELS].copy())
+            result.goal_pixels = episode.goal_pixels
+            goal_keypoints = _keypoints(controller, "last_goal_keypoints", i)
+            if goal_keypoints is not None:
+                result.goal_keypoints = goal_keypoints
+        missing = task.num_steps + 1 - len(distances[i])
+        result.distances = np.asarray(distances[i] + [distances[i][-1]] * missing, np.float64)
+        result.goal_ssim = np.asarray(similarities[i] + [similarities[i][-1]] * missing, np.float64)
+        result.success = all_within(obs[i][OBJECT_POS], episode.goal_pos, task.success_threshold)
+    return results
 
 
 def run_episode(
@@ -112,50 +168,23 @@ def run_episode(
     method: str,
     task: TaskSettings,
     record: bool = False,
-    on_step: Callable[[int], None] | None = None,
     observes: tuple[str, ...] | None = None,
 ) -> EpisodeResult:
-    """Runs ``task.num_steps`` pushes of ``controller`` from the episode's start.
-
-    An unstable simulation ends the episode early; its last distance and SSIM are carried to
-    ``T``.
-    With ``record`` the frames and (for KINet controllers) detected keypoints are kept. With
-    ``observes`` the controller is handed only those observation entries (e.g. ``("pixels",)``:
-    no ground truth reaches a controller that plans from images).
-    """
-    obs = episode.start
-    distances = [mean_goal_distance(obs[OBJECT_POS], episode.goal_pos)]
-    similarities = [goal_similarity(obs, episode)]
-    result = EpisodeResult(method, episode.seed, np.zeros(0), False, False)
-    controller.reset(episode)
-    for step in range(task.num_steps):
-        seen = obs if observes is None else {key: obs[key] for key in observes}
-        action = np.clip(np.asarray(controller.act(seen), dtype=np.float32), -1.0, 1.0)
-        if record:
-            _record(result, controller, obs)
-        obs = episode.env.step(action).observation
-        distances.append(mean_goal_distance(obs[OBJECT_POS], episode.goal_pos))
-        similarities.append(goal_similarity(obs, episode))
-        if on_step is not None:
-            on_step(step)
-        if episode.env.task.unstable:
-            result.unstable = True
-            break
-    if record:
-        result.frames.append(obs[PIXELS].copy())
-        result.goal_pixels = episode.goal_pixels
-        push_planner = getattr(controller, "push_planner", None)
-        if push_planner is not None and push_planner.last_goal_keypoints is not None:
-            result.goal_keypoints = push_planner.last_goal_keypoints.numpy()
-    missing = task.num_steps + 1 - len(distances)
-    result.distances = np.asarray(distances + [distances[-1]] * missing, dtype=np.float64)
-    result.goal_ssim = np.asarray(similarities + [similarities[-1]] * missing, dtype=np.float64)
-    result.success = all_within(obs[OBJECT_POS], episode.goal_pos, task.success_threshold)
-    return result
+    """:func:`run_episodes` for one episode."""
+    return run_episodes([episode], controller, method, task, [record], observes)[0]
 
 
-def _record(result: EpisodeResult, controller: Controller, obs: dict[str, np.ndarray]) -> None:
-    result.frames.append(obs[PIXELS].copy())
+def _keypoints(controller: Controller, name: str, i: int) -> np.ndarray | None:
+    """Episode ``i``'s keypoints ``[K, 2]`` of a KINet controller's planner, else None."""
     push_planner = getattr(controller, "push_planner", None)
-    if push_planner is not None and push_planner.last_keypoints is not None:
-        result.keypoints.append(push_planner.last_keypoints.numpy())
+    keypoints = None if push_planner is None else getattr(push_planner, name)
+    return None if keypoints is None else keypoints[i].numpy()
+
+
+def _record(
+    result: EpisodeResult, controller: Controller, obs: dict[str, np.ndarray], i: int
+) -> None:
+    result.frames.append(obs[PIXELS].copy())
+    keypoints = _keypoints(controller, "last_keypoints", i)
+    if keypoints is not None:
+        result.keypoints.append(keypoints)

@@ -1,8 +1,8 @@
 """The methods of the rearrangement evaluation: one declaration each, with label and controller.
 
-A method's controller factory gets a :class:`MethodContext` (the model, the episode's scene, the
-settings and the episode seed). ``needs`` says which model a method plans with: ``"kinet"``
-(a :class:`~kinet_rl.models.KINetWorldModel`), ``"baseline"`` (IN, VisIN, Forw, ForwInv or V-CDN) or
+A method's controller factory gets a :class:`MethodContext` (the model, the episodes' scene, the
+settings and the episode seeds: one controller plans for a batch of episodes). ``needs`` says
+which model a method plans with: ``"kinet"`` (a :class:`~kinet_rl.models.KINetWorldModel`), ``"baseline"`` (IN, VisIN, Forw, ForwInv or V-CDN) or
 ``None`` (random pushes and the oracle need no model).
 """
 
@@ -42,12 +42,12 @@ IMAGES = (PIXELS,)
 
 @dataclass(frozen=True)
 class MethodContext:
-    """What a controller factory is given for one episode."""
+    """What a controller factory is given for a batch of episodes of one scene."""
 
     model: nn.Module | None
     scene: SceneSettings
     settings: RearrangementSettings
-    seed: int
+    seeds: tuple[int, ...]
 
 
 @dataclass(frozen=True)
@@ -58,7 +58,7 @@ class Method:
         name: Its key in settings, summaries and JSON.
         label: How reports and tables name it.
         needs: The model it plans with (see the module docstring).
-        make_controller: Builds its controller for one episode.
+        make_controller: Builds its controller for a batch of episodes.
         observes: The observation entries its controller is handed each step: learned-model
             controllers see only what a real robot's camera gives (``pixels``); the GT-state
             baselines and the oracle also get ``object_pos``.
@@ -86,7 +86,7 @@ class Method:
             )
 
     def controller(self, ctx: MethodContext) -> Controller:
-        """The method's controller for one episode, after checking the model."""
+        """The method's controller for the context's episodes, after checking the model."""
         self.check_model(ctx.model)
         return self.make_controller(ctx)
 
@@ -95,7 +95,7 @@ def _kinet(reward: Callable[[], KINetReward]) -> Callable[[MethodContext], Contr
     def make(ctx: MethodContext) -> Controller:
         half_size = workspace_for(ctx.scene.task).half_size
         planner = PushPlanner(
-            ctx.model, half_size, reward=reward(), seed=ctx.seed, **dict(ctx.settings.planner)
+            ctx.model, half_size, reward=reward(), seed=ctx.seeds, **dict(ctx.settings.planner)
         )
         return KINetController(planner)
 
@@ -104,7 +104,7 @@ def _kinet(reward: Callable[[], KINetReward]) -> Callable[[MethodContext], Contr
 
 def _oracle(ctx: MethodContext) -> Controller:
     settings = ctx.settings
-    return OracleController(ctx.scene, settings.planner, settings.oracle_contact_radius, ctx.seed)
+    return OracleController(ctx.scene, settings.planner, settings.oracle_contact_radius, ctx.seeds)
 
 
 METHODS: dict[str, Method] = {
@@ -145,7 +145,7 @@ METHODS: dict[str, Method] = {
             _kinet(KeypointL2Reward),
             IMAGES,
         ),
-        Method("random", "Random pushes", None, lambda ctx: RandomController(ctx.seed), ()),
+        Method("random", "Random pushes", None, lambda ctx: RandomController(ctx.seeds), ()),
         Method(
             "oracle", "Oracle MPC (GT state, analytic push model)", None, _oracle, (OBJECT_POS,)
         ),
@@ -153,7 +153,7 @@ METHODS: dict[str, Method] = {
             "model_mpc",
             "Baseline model MPC (distance to goal)",
             "baseline",
-            lambda ctx: BaselineMPCController(ctx.model, ctx.settings.planner, ctx.seed),
+            lambda ctx: BaselineMPCController(ctx.model, ctx.settings.planner, ctx.seeds),
             (PIXELS, OBJECT_POS),  # IN/VisIN plan on GT positions (Forw/ForwInv/V-CDN: pixels only)
         ),
     )

@@ -1,6 +1,8 @@
 """Runs rearrangement episodes of each method, in parallel workers, and returns the results.
 
-Every episode is a job ``(condition, method, seed)``; jobs run in a ``spawn`` process pool
+Every episode is a job ``(condition, method, seed)``; up to ``batch_episodes`` jobs of one
+condition and method run together in lockstep, planned in one batched planner call per step
+(:func:`~kinet_rl.rearrangement.episodes.run_episodes`). Batches run in a ``spawn`` process pool
 (each worker rebuilds the model from its weights once and uses one torch thread) or inline with
 ``workers <= 1``; the workers ignore Ctrl-C, and an interrupted run terminates them. Episode
 ``i`` of a condition uses seed ``first_seed + i`` (by split) for its scene and goal, the same for
@@ -16,7 +18,7 @@ import importlib
 import logging
 import multiprocessing
 import multiprocessing.pool
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +29,7 @@ from tqdm import tqdm
 
 from kinet_rl.interrupts import worker_processes
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
-from kinet_rl.rearrangement.episodes import make_episode, run_episode
+from kinet_rl.rearrangement.episodes import Episode, make_episode, run_episodes
 from kinet_rl.rearrangement.methods import METHODS, MethodContext, check_methods, check_model
 from kinet_rl.rearrangement.results import EpisodeResult, RearrangementResults
 from kinet_rl.rearrangement.settings import Condition, RearrangementSettings
@@ -74,30 +76,58 @@ def _init_worker(payload: dict[str, Any] | None) -> None:
         _WORKER_MODEL.eval()
 
 
-def run_job(
-    job: Job, settings: RearrangementSettings, model: torch.nn.Module | None
-) -> EpisodeResult:
-    """Runs one episode of ``job`` with ``model``."""
-    scene = job.condition.scene
-    episode = make_episode(scene, settings.task, job.seed)
+def run_jobs(
+    jobs: Sequence[Job], settings: RearrangementSettings, model: torch.nn.Module | None
+) -> list[EpisodeResult]:
+    """Runs the episodes of ``jobs`` (one condition and method) together with ``model``."""
+    condition, method_name = jobs[0].condition, jobs[0].method
+    if any((job.condition, job.method) != (condition, method_name) for job in jobs):
+        raise ValueError("run_jobs runs episodes of one condition and method together.")
+    episodes: list[Episode] = []
     try:
-        method = METHODS[job.method]
-        controller = method.controller(MethodContext(model, scene, settings, job.seed))
-        return run_episode(
-            episode,
+        for job in jobs:
+            episodes.append(make_episode(condition.scene, settings.task, job.seed))
+        method = METHODS[method_name]
+        seeds = tuple(job.seed for job in jobs)
+        controller = method.controller(MethodContext(model, condition.scene, settings, seeds))
+        return run_episodes(
+            episodes,
             controller,
-            job.method,
+            method_name,
             settings.task,
-            record=job.record,
+            record=[job.record for job in jobs],
             observes=method.observes,
         )
     finally:
-        episode.close()
+        for episode in episodes:
+            episode.close()
 
 
-def _run_job_in_worker(args: tuple[Job, RearrangementSettings]) -> tuple[Job, EpisodeResult]:
-    job, settings = args
-    return job, run_job(job, settings, _WORKER_MODEL)
+def _run_jobs_in_worker(
+    args: tuple[list[Job], RearrangementSettings],
+) -> list[tuple[Job, EpisodeResult]]:
+    jobs, settings = args
+    return list(zip(jobs, run_jobs(jobs, settings, _WORKER_MODEL), strict=True))
+
+
+def batches(jobs: Iterable[Job], size: int) -> list[list[Job]]:
+    """``jobs`` in order, cut into runs of at most ``size`` of one condition and method."""
+    out: list[list[Job]] = []
+    for job in jobs:
+        last = out[-1] if out else None
+        if (
+            last
+            and len(last) < size
+            and (last[0].condition, last[0].method)
+            == (
+                job.condition,
+                job.method,
+            )
+        ):
+            last.append(job)
+        else:
+            out.append([job])
+    return out
 
 
 def make_jobs(settings: RearrangementSettings, conditions: Iterable[Condition]) -> list[Job]:
@@ -116,9 +146,11 @@ def make_jobs(settings: RearrangementSettings, conditions: Iterable[Condition]) 
 
 
 def _outcomes(jobs: list[Job], settings: RearrangementSettings, model: torch.nn.Module | None):
+    """``(job, result)`` of every job, batch by batch as they finish."""
+    groups = batches(jobs, settings.batch_episodes)
     if settings.workers <= 1 or not jobs:
-        for job in jobs:
-            yield job, run_job(job, settings, model)
+        for group in groups:
+            yield from zip(group, run_jobs(group, settings, model), strict=True)
         return
     payload = None if model is None else _model_payload(model)
     start = functools.partial(
@@ -128,7 +160,8 @@ def _outcomes(jobs: list[Job], settings: RearrangementSettings, model: torch.nn.
         initargs=(payload,),
     )
     with worker_processes(start, _stop_pool) as pool:
-        yield from pool.imap_unordered(_run_job_in_worker, [(j, settings) for j in jobs])
+        for finished in pool.imap_unordered(_run_jobs_in_worker, [(g, settings) for g in groups]):
+            yield from finished
 
 
 def _stop_pool(pool: multiprocessing.pool.Pool) -> None:

@@ -113,6 +113,8 @@ class RearrangementSettings:
         backgrounds: Extra backgrounds to test (e.g. ``["random"]``; empty: skipped).
         generalization_episodes: Episodes per generalization cell.
         workers: Parallel worker processes (<= 1 runs inline).
+        batch_episodes: Episodes of one condition and method that a worker runs in lockstep,
+            planned in one batched planner call per step (1: one episode at a time).
         split: ``"validation"`` (choosing) or ``"test"`` (reporting) episodes, see
             :data:`SPLIT_SEEDS`.
         videos: Episodes of ``kinet_method`` recorded as GIFs.
@@ -131,12 +133,13 @@ class RearrangementSettings:
     backgrounds: tuple[str, ...] = ()
     generalization_episodes: int = 2
     workers: int = 2
+    batch_episodes: int = 1
     split: Split = "test"
     videos: int = 1
     kinet_method: str = "kinet_keypoints_l2"
 
     def __post_init__(self) -> None:
-        at_least(self, 1, "episodes", "generalization_episodes")
+        at_least(self, 1, "episodes", "generalization_episodes", "batch_episodes")
         at_least(self, 0, "videos")
         require(self.split in SPLIT_SEEDS, "split", self.split, f"one of {list(SPLIT_SEEDS)}")
         require(
