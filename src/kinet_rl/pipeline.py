@@ -13,7 +13,7 @@ from collections.abc import Callable, Mapping
 from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import torch
 from torch import nn
@@ -39,6 +39,7 @@ from kinet_rl.envs.geometry import SceneGeometry
 from kinet_rl.envs.settings import SceneSettings
 from kinet_rl.evaluation.forward import keypoint_accuracy
 from kinet_rl.evaluation.report import ReportSettings, TrainingReport, hit_radius
+from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.models.pretrained import model_card
 from kinet_rl.models.world_model import KINetWorldModel
 from kinet_rl.rearrangement.methods import check_methods, check_model
@@ -503,7 +504,7 @@ def _train_and_evaluate(
     if not ctx.is_main:
         logger.close()
         return {}
-    model.save_checkpoint(run_dir / model_file(model), scene=scene)
+    cast(ConfigCheckpointMixin, model).save_checkpoint(run_dir / model_file(model), scene=scene)
     results = {**report.final(trainer.step), "world_size": ctx.world_size}
     episodes = settings.report.rearrangement_episodes
     if isinstance(model, KINetWorldModel) and episodes > 0:

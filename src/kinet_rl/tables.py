@@ -292,7 +292,7 @@ def run_row(
     net = load_model(cfg, run_dir)
     eval_overrides = tables.eval
 
-    def forward() -> dict[str, Any]:
+    def forward() -> dict[int, dict[str, float]]:
         settings = ExperimentSettings.from_container(to_dict(cfg))
         expect = {k: settings.env[k] for k in DATASET_ENV_KEYS}
         test = load_dataset(settings.dataset_path, "test", expect)

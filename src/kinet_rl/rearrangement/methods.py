@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, cast
 
 from torch import nn
 
@@ -94,8 +94,9 @@ class Method:
 def _kinet(reward: Callable[[], KINetReward]) -> Callable[[MethodContext], Controller]:
     def make(ctx: MethodContext) -> Controller:
         half_size = workspace_for(ctx.scene.task).half_size
+        model = cast(KINetWorldModel, ctx.model)  # Method.controller checked it
         planner = PushPlanner(
-            ctx.model, half_size, reward=reward(), seed=ctx.seeds, **dict(ctx.settings.planner)
+            model, half_size, reward=reward(), seed=ctx.seeds, **dict(ctx.settings.planner)
         )
         return KINetController(planner)
 
@@ -153,7 +154,9 @@ METHODS: dict[str, Method] = {
             "model_mpc",
             "Baseline model MPC (distance to goal)",
             "baseline",
-            lambda ctx: BaselineMPCController(ctx.model, ctx.settings.planner, ctx.seeds),
+            lambda ctx: BaselineMPCController(
+                cast(nn.Module, ctx.model), ctx.settings.planner, ctx.seeds
+            ),
             (PIXELS, OBJECT_POS),  # IN/VisIN plan on GT positions (Forw/ForwInv/V-CDN: pixels only)
         ),
     )
