@@ -104,6 +104,19 @@ def test_push_through_an_object_moves_it_and_a_far_push_moves_none():
     assert (pos2[0, 0] - pos1[0, 0]) * direction > 0.03  # along the push direction
 
 
+def test_five_elongated_blocks_always_find_a_placement():
+    """Five ``gen`` blocks do not always fit the table: the episode draws them again (before
+    this, 5 of the 20 Table II test seeds 50000-50019 raised within 20 resets, e.g. 50000)."""
+    for seed in (50000, 50006, 50008):
+        env = make_dm_env(num_objects=5, geometry="gen", image_size=16, seed=seed)
+        try:
+            for _ in range(20):
+                pos = env.reset().observation["object_pos"]
+                assert np.abs(pos).max() < workspace_for("blocks").half_size
+        finally:
+            env.close()
+
+
 def test_set_object_poses_round_trips():
     env = make_dm_env(num_objects=2, seed=0)
     env.reset()

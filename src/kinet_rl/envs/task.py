@@ -60,6 +60,9 @@ _BAD_STATE_WARNINGS = (
 #: while moving), is farther than this (metres) from its target was stopped by an object.
 BLOCKED_TOLERANCE = 0.005
 BLOCKED_HOLD_STEPS = 20
+#: Draws of the objects (geometry or YCB subset) an episode may take when no collision-free
+#: placement fits the drawn ones, e.g. 5 elongated ``gen`` blocks on the blocks table.
+OBJECT_DRAWS = 10
 
 
 @dataclass(frozen=True)
@@ -174,18 +177,28 @@ class PushObjects(base.Task):
 
     # ----------------------------------------------------------------- episode set-up
     def initialize_episode(self, physics: PushPhysics) -> None:
-        """Draw objects, colours, background and a collision-free placement; let it settle."""
+        """Draw objects, colours, background and a collision-free placement (drawing the objects
+        again when no placement fits them); let it settle."""
         self._unstable = False
         model = physics.model
-        if self.ycb_objects is None:
-            self._draw_blocks(physics)
-        else:
-            self._draw_ycb(physics, self.ycb_objects)
-        self._draw_background(physics)
-        self._index_objects(physics)
-        xy, yaw = sample_placements(
-            self.random, self._footprint, self.workspace.half_size, offsets=self._footprint_offset
-        )
+        for draw in range(OBJECT_DRAWS):
+            if self.ycb_objects is None:
+                self._draw_blocks(physics)
+            else:
+                self._draw_ycb(physics, self.ycb_objects)
+            self._draw_background(physics)
+            self._index_objects(physics)
+            try:
+                xy, yaw = sample_placements(
+                    self.random,
+                    self._footprint,
+                    self.workspace.half_size,
+                    offsets=self._footprint_offset,
+                )
+                break
+            except ValueError:
+                if draw == OBJECT_DRAWS - 1:
+                    raise
         physics.data.qvel[:] = 0.0
         self._park_pusher(physics)
         self.set_object_poses(physics, xy, yaw)
