@@ -20,6 +20,7 @@ from tensordict import TensorDict
 
 import kinet_rl.atomic
 from kinet_rl.baselines import (
+    FullStateInteractionModel,
     ImageForwardInverseModel,
     ImageForwardModel,
     ObjectInteractionModel,
@@ -53,7 +54,7 @@ TINY_VCDN = {
     "num_rounds": 2,
 }
 #: Baseline names understood by the ``tiny_baseline`` fixture.
-BASELINES = ("forw", "forwinv", "in", "visin", "vcdn")
+BASELINES = ("forw", "forwinv", "in", "in_full", "visin", "vcdn")
 
 
 @pytest.fixture(scope="session")
@@ -75,8 +76,8 @@ def tiny_kinet() -> Callable[..., KINetWorldModel]:
 
 @pytest.fixture
 def tiny_baseline() -> Callable[..., torch.nn.Module]:
-    """Builds a tiny, untrained baseline by name (``forw``, ``forwinv``, ``in``, ``visin``,
-    ``vcdn``)."""
+    """Builds a tiny, untrained baseline by name (``forw``, ``forwinv``, ``in``, ``in_full``,
+    ``visin``, ``vcdn``)."""
 
     def make(name: str, num_objects: int = 3, image_size: int = 32) -> torch.nn.Module:
         if name not in BASELINES:
@@ -88,10 +89,9 @@ def tiny_baseline() -> Callable[..., torch.nn.Module]:
             return model_class(feature_dim=8, channels=4, probe_hidden_dim=8, **small)
         if name == "vcdn":
             return VCDNWorldModel(**TINY_VCDN)
-        if name == "in":
-            return ObjectInteractionModel(
-                num_objects=num_objects, embed_dim=8, num_rounds=1, **small
-            )
+        if name in ("in", "in_full"):
+            model_class = ObjectInteractionModel if name == "in" else FullStateInteractionModel
+            return model_class(num_objects=num_objects, embed_dim=8, num_rounds=1, **small)
         return VisualInteractionModel(
             num_objects=num_objects, image_size=image_size, crop_size=8.0, crop_resolution=8,
             feat_dim=4, channels=4, embed_dim=8, num_rounds=1, **small,

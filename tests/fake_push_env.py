@@ -1,7 +1,8 @@
 """A tiny, fast stand-in for ``kinet_rl.envs.make_env`` used by data tests (no MuJoCo).
 
 Objects are coloured squares on a grey table; a push moves every object whose centre lies
-within ``object_radius`` of the push segment to the segment's end. Specs match the real env.
+within ``object_radius`` of the push segment to the segment's end; each object's
+``object_shape`` is its square given twice. Specs match the real env.
 """
 
 from __future__ import annotations
@@ -40,10 +41,16 @@ class FakePushEnv(EnvBase):
             pixels=Bounded(0, 255, shape=(h, h, 3), dtype=torch.uint8),
             object_pos=Unbounded(shape=(n, 2), dtype=torch.float32),
             object_yaw=Unbounded(shape=(n,), dtype=torch.float32),
+            object_shape=Unbounded(shape=(n, 8), dtype=torch.float32),
             unstable=Bounded(0, 1, shape=(1,), dtype=torch.bool),
         )
         self.action_spec = Bounded(-1.0, 1.0, shape=(4,), dtype=torch.float32)
         self.reward_spec = Unbounded(shape=(1,), dtype=torch.float32)
+
+    def object_shape(self) -> torch.Tensor:
+        """``[N, 8]``: each object's square, (0, 0, radius, radius) twice."""
+        square = torch.tensor([0.0, 0.0, self.object_radius, self.object_radius])
+        return square.repeat(self.num_objects, 2)
 
     def _set_seed(self, seed: int | None) -> None:
         self._rng = np.random.default_rng(seed)
@@ -62,6 +69,7 @@ class FakePushEnv(EnvBase):
             pixels=self._render(),
             object_pos=torch.as_tensor(self._pos, dtype=torch.float32),
             object_yaw=torch.zeros(self.num_objects),
+            object_shape=self.object_shape(),
             unstable=torch.tensor([unstable]),
         )
 

@@ -29,6 +29,7 @@ LABELS = {
     "forw": "Forw",
     "forwinv": "ForwInv",
     "in": "IN (GT state)",
+    "in_full": "IN-full (GT pos, yaw, shape)",
     "visin": "VisIN (GT state + image)",
     "vcdn": "V-CDN",
     "random": METHODS["random"].label,
@@ -156,7 +157,7 @@ def _planner(row: str, kinet_method: str) -> str:
         return "MPC on goal-image feature distance"
     if row == "vcdn":
         return "MPC on goal-image keypoint distance"
-    if row in ("in", "visin", "oracle"):
+    if row in ("in", "in_full", "visin", "oracle"):
         return "MPC on GT goal distance"
     return "-"
 

@@ -11,6 +11,9 @@ PIXELS = "pixels"  # uint8 [*B, H, W, 3] from the env
 ACTION = "action"  # float32 [*B, 4] push (start x, start y, end x, end y) in [-1, 1]
 OBJECT_POS = "object_pos"  # float32 [*B, N, 2] metres, table frame (evaluation only)
 OBJECT_YAW = "object_yaw"  # float32 [*B, N] radians (evaluation only)
+#: float32 [*B, N, 8] metres: each object's body-frame footprint as two boxes, each (centre x,
+#: centre y, half extent x, half extent y); constant within an episode (IN-full, evaluation)
+OBJECT_SHAPE = "object_shape"
 UNSTABLE = "unstable"  # bool [*B, 1] the simulation went unstable; the episode ended
 STEP_REWARD = "reward"  # [*B, 1] written by a model env's step module (TorchRL nests it)
 REWARD = ("next", STEP_REWARD)  # [*B, 1]

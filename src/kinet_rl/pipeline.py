@@ -31,7 +31,7 @@ from kinet_rl.config_schema import (
     settings_from,
     target_arguments,
 )
-from kinet_rl.data import collect_dataset, load_dataset, split_ranges
+from kinet_rl.data import PushDataset, collect_dataset, load_dataset, split_ranges
 from kinet_rl.data.collection import DEFAULT_SPLITS, check_collection
 from kinet_rl.envs import make_env
 from kinet_rl.envs.factory import check_env_arguments
@@ -427,6 +427,15 @@ def model_file(model: nn.Module) -> str:
     return trained_model_file(type(model))
 
 
+def check_dataset_for(model: nn.Module, dataset: PushDataset) -> None:
+    """Raises ``DatasetMismatchError`` if ``dataset`` stores no array that ``model`` reads.
+
+    A model lists them in ``state_keys`` (IN-full: ``object_yaw``, ``object_shape``; datasets
+    collected by an older kinet_rl lack ``object_shape``).
+    """
+    dataset.check_keys(getattr(model, "state_keys", ()), type(model).__name__)
+
+
 def run_experiment(
     settings: ExperimentSettings,
     build_model: Callable[[], nn.Module],
@@ -473,6 +482,8 @@ def _train_and_evaluate(
         for split in ("train", "val", "test")
     }
     model = build_model()
+    for dataset in data.values():
+        check_dataset_for(model, dataset)
     loss = build_loss(model)
     scene = settings.scene
     geometry = SceneGeometry.of_scene(scene.task, scene.camera, scene.image_size)

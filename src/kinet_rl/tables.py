@@ -65,6 +65,7 @@ from kinet_rl.pipeline import (
     DATASET_ENV_KEYS,
     ExperimentSettings,
     check_config,
+    check_dataset_for,
     evaluate_rearrangement,
     run_experiment,
     trained_model_file,
@@ -83,6 +84,7 @@ EXPERIMENT_SUFFIX = {
     "forw": "_forw",
     "forwinv": "_forwinv",
     "in": "_in",
+    "in_full": "_in_full",
     "visin": "_visin",
     "vcdn": "_vcdn",
 }
@@ -296,6 +298,7 @@ def run_row(
         settings = ExperimentSettings.from_container(to_dict(cfg))
         expect = {k: settings.env[k] for k in DATASET_ENV_KEYS}
         test = load_dataset(settings.dataset_path, "test", expect)
+        check_dataset_for(net, test)
         scene = settings.scene
         geometry = SceneGeometry.of_scene(scene.task, scene.camera, scene.image_size)
         floor = net.detector_floor(geometry) if isinstance(net, KINetWorldModel) else None

@@ -13,6 +13,7 @@ import pytest
 import torch
 
 from kinet_rl.baselines import (
+    FullStateInteractionModel,
     ImageForwardInverseModel,
     ImageForwardLoss,
     ImageForwardModel,
@@ -48,8 +49,9 @@ def build(name: str):
     if name == "forwinv":
         model = ImageForwardInverseModel(**IMAGE)
         return model, ImageForwardLoss(model, inv_weight=1.0), 1000, 3e-3, 2.5, 0.92
-    if name == "in":
-        model = ObjectInteractionModel(num_objects=3, **OBJECT)
+    if name in ("in", "in_full"):
+        model_class = ObjectInteractionModel if name == "in" else FullStateInteractionModel
+        model = model_class(num_objects=3, **OBJECT)
         return model, ObjectForwardLoss(model), 400, 1e-3, 4.0, 0.7
     model = VisualInteractionModel(
         num_objects=3,
@@ -74,7 +76,7 @@ def data():
     torch.set_num_threads(threads)
 
 
-@pytest.mark.parametrize("name", ["forw", "forwinv", "in", "visin"])
+@pytest.mark.parametrize("name", ["forw", "forwinv", "in", "in_full", "visin"])
 def test_baseline_learns_forward_prediction(name, data):
     train, test = data
     torch.manual_seed(0)

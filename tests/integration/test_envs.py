@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import collections
+import functools
 import itertools
 import json
 import logging
@@ -67,6 +68,8 @@ def test_every_variant_steps_and_passes_check_env_specs(variant):
     pos = td["next", "object_pos"]
     assert pos.shape == (2, num, 2) and pos.dtype == torch.float32
     assert td["next", "object_yaw"].shape == (2, num)
+    assert td["next", "object_shape"].shape == (2, num, 8)
+    assert torch.equal(td["next", "object_shape"][0], td["object_shape"][0])  # fixed per episode
     assert not td["next", "unstable"].any()
     assert (pos.abs() <= workspace_for(task).table_half_size).all()
     assert td["next", "pixels"].float().std() > 5.0  # a real image, not a blank frame
@@ -177,6 +180,7 @@ def test_gymnasium_ids(task):
     env = gymnasium.make(GYM_IDS[task], render_mode="rgb_array", num_objects=2, image_size=48)
     obs, _ = env.reset(seed=4)
     assert env.observation_space.contains(obs)
+    assert env.observation_space["object_shape"].shape == obs["object_shape"].shape == (2, 8)
     assert env.render().shape == (48, 48, 3)
     obs, reward, terminated, truncated, _ = env.step(env.action_space.sample())
     assert env.observation_space.contains(obs) and not terminated and not truncated
@@ -342,3 +346,39 @@ def test_random_push_collection_discards_at_most_two_percent_of_ycb_episodes():
         f"objects in discarded episodes: {dict(discarded)}"
     )
     assert len(seen) == 12  # every object was drawn
+
+
+@pytest.mark.parametrize("task", [pytest.param(t, marks=_maybe_ycb(t)) for t in ("blocks", "ycb")])
+def test_collected_shapes_are_the_geometry_each_episode_drew(task, tmp_path):
+    """The stored ``object_shape`` of each episode equals the objects the env drew for it: the
+    blocks' two cuboids read back from the compiled model, a YCB object's footprint twice."""
+    from kinet_rl.data import collect_dataset, load_dataset
+    from kinet_rl.data.collection import seeded_env
+
+    config = {"task": task, "num_objects": 3, "image_size": 16, "max_steps": 2}
+    env_fn = functools.partial(make_env, **config)
+    path = collect_dataset(
+        env_fn, config, root=tmp_path, name=task, num_episodes=2, seed=5, num_workers=1,
+        splits={"train": 1.0}, progress=False,
+    )  # fmt: skip
+    data = load_dataset(path, "all")
+    shapes = []
+    for episode in range(2):
+        env = seeded_env(env_fn, 5, episode, 1)
+        env.reset()
+        dm = env.base_env._env
+        model, push = dm.physics.model, dm.task
+        expected = []
+        for body in push.active:
+            if push.ycb_objects is None:
+                boxes = [(model.name2id(f"{body}_{g}", "geom")) for g in "ab"]
+                box = [np.r_[model.geom_pos[g, :2], model.geom_size[g, :2]] for g in boxes]
+            else:
+                half = push.ycb_objects[push.layout.object_bodies.index(body)].half_extents
+                box = [np.r_[0.0, 0.0, half[:2]]] * 2
+            expected.append(np.concatenate(box))
+        env.close()
+        stored = data.transitions(torch.tensor([episode]), torch.tensor([1]))["object_shape"][0]
+        np.testing.assert_allclose(stored.numpy(), np.stack(expected), rtol=1e-6, atol=1e-7)
+        shapes.append(stored)
+    assert not torch.equal(shapes[0], shapes[1])  # drawn per episode

@@ -51,7 +51,9 @@ SMALL_KINET = [*SMALL, "model.num_keypoints=4", "model.embed_dim=16"]
 
 def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, conf_dir) -> None:
     torch.set_num_threads(1)
-    models = ["kinet", "kinet_determ", "kinet_no_ctr", "forw", "forwinv", "in", "visin", "vcdn"]
+    models = [
+        "kinet", "kinet_determ", "kinet_no_ctr", "forw", "forwinv", "in", "in_full", "visin", "vcdn"
+    ]  # fmt: skip
     with initialize_config_dir(str(conf_dir), version_base="1.3"):
         overrides = [
             "tables.forward_sequences=8",
@@ -86,7 +88,7 @@ def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, con
         assert build_tables(tables, tmp_path).read_text() == text
         assert (tmp_path / "blocks_topview_in" / "results.json").stat().st_mtime == mtime
     for label in ["KINet", "KINet-determ", "KINet-no-ctr", "Forw", "ForwInv", "IN (GT state)",
-                  "VisIN (GT state + image)", "V-CDN", "No motion", "Random pushes",
+                  "IN-full (GT pos, yaw, shape)", "VisIN (GT state + image)", "V-CDN", "No motion", "Random pushes",
                   "Oracle MPC"]:  # fmt: skip
         assert f"| {label}" in text, label
     assert "not run" not in text
@@ -127,7 +129,8 @@ def test_tables_command_writes_every_row_with_finite_numbers(tmp_path: Path, con
 
 
 @pytest.mark.parametrize(
-    ("name", "workers"), [("forw", 1), ("forwinv", 1), ("in", 1), ("visin", 2), ("vcdn", 2)]
+    ("name", "workers"),
+    [("forw", 1), ("forwinv", 1), ("in", 1), ("in_full", 2), ("visin", 2), ("vcdn", 2)],
 )
 def test_baseline_mpc_runs_through_the_shared_rearrangement_evaluation(
     name: str, workers: int, tmp_path: Path, tiny_baseline

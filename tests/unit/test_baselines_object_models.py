@@ -1,4 +1,5 @@
-"""Contract tests of the IN and VisIN baselines (shapes, keys, object-count refusal, crops)."""
+"""Contract tests of the IN, IN-full and VisIN baselines (shapes, keys, object-count refusal,
+crops)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import torch
 from tensordict import TensorDict
 
 from kinet_rl.baselines import (
+    FullStateInteractionModel,
     ObjectCountError,
     ObjectForwardLoss,
     ObjectInteractionModel,
@@ -35,10 +37,15 @@ def batch(num_objects: int = N, seed: int = 0) -> TensorDict:
             "pixels": torch.randint(0, 256, (B, H, H, 3), generator=gen, dtype=torch.uint8),
             "action": torch.rand(B, 4, generator=gen) * 2 - 1,
             "object_pos": pos[0],
+            "object_yaw": (torch.rand(B, num_objects, generator=gen) * 2 - 1) * torch.pi,
+            "object_shape": torch.rand(B, num_objects, 8, generator=gen) * 0.04,
             "next": {"object_pos": pos[1]},
         },
         batch_size=[B],
     )
+
+
+START_KEYS = ("pixels", "object_pos", "object_yaw", "object_shape")
 
 
 @pytest.fixture(scope="module")
@@ -47,6 +54,7 @@ def models():
     return [
         ObjectInteractionModel(num_objects=N, **TINY_IN),
         VisualInteractionModel(num_objects=N, **TINY_VISIN),
+        FullStateInteractionModel(num_objects=N, **TINY_IN),
     ]
 
 
@@ -73,15 +81,33 @@ def test_refuses_another_object_count(models, count):
     for model in models:
         with pytest.raises(ObjectCountError, match=rf"num_objects=3.*has {count} objects"):
             model(batch(num_objects=count))
-        start = batch(num_objects=count).select("pixels", "object_pos")
+        start = batch(num_objects=count).select(*START_KEYS)
         with pytest.raises(ObjectCountError, match=f"num_objects={count}"):
             model.object_rollout()(start, torch.zeros(B, 2, 4))
 
 
 def test_rollout_shapes(models):
     for model in models:
-        pred = model.object_rollout()(batch().select("pixels", "object_pos"), torch.rand(B, 3, 4))
+        pred = model.object_rollout()(batch().select(*START_KEYS), torch.rand(B, 3, 4))
         assert pred.shape == (B, 3, N, 2) and pred.dtype == torch.float32
+
+
+def test_in_full_prediction_depends_on_yaw_and_shape(models):
+    in_full = models[2]
+    assert in_full.node_features(batch()).shape == (B, N, 10)
+    td = batch()
+    reference = in_full(td.clone())["next", "object_pos"]
+    turned, reshaped = td.clone(), td.clone()
+    turned["object_yaw"] = td["object_yaw"] + 1.0
+    reshaped["object_shape"] = td["object_shape"] * 2.0
+    for changed in (turned, reshaped):
+        pred = in_full(changed)["next", "object_pos"]
+        assert (pred - reference).abs().max() > 1e-6
+
+
+def test_in_full_names_the_missing_state(models):
+    with pytest.raises(KeyError, match=r"missing \['object_shape'\].*collect it again"):
+        models[2](batch().exclude("object_shape"))
 
 
 def test_visin_refuses_other_image_sizes(models):

@@ -25,6 +25,8 @@ from kinet_rl.keys import (
     KP_POS,
     OBJECT_FEAT,
     OBJECT_POS,
+    OBJECT_SHAPE,
+    OBJECT_YAW,
 )
 from kinet_rl.pipeline import evaluate_rearrangement
 from kinet_rl.planners import GraphMPCPlanner, StateModelEnv
@@ -41,6 +43,8 @@ def observation(seed: int) -> dict[str, np.ndarray]:
     return {
         "pixels": rng.integers(0, 255, (SIZE, SIZE, 3), dtype=np.uint8),
         "object_pos": rng.uniform(-0.15, 0.15, (N, 2)).astype(np.float32),
+        "object_yaw": rng.uniform(-np.pi, np.pi, N).astype(np.float32),
+        "object_shape": rng.uniform(0.01, 0.04, (N, 8)).astype(np.float32),
     }
 
 
@@ -48,8 +52,12 @@ def start_state(env, seed: int = 0):
     obs, goal = observation(seed), observation(seed + 1)
     pixels = torch.from_numpy(obs["pixels"])
     if isinstance(env, ObjectModelEnv):
+        state = {key: torch.from_numpy(obs[key]) for key in env.model.state_keys}
         return env.observe(
-            pixels, torch.from_numpy(obs["object_pos"]), torch.from_numpy(goal["object_pos"])
+            pixels,
+            torch.from_numpy(obs["object_pos"]),
+            torch.from_numpy(goal["object_pos"]),
+            **state,
         )
     return env.observe(pixels, torch.from_numpy(goal["pixels"]))
 
@@ -61,7 +69,7 @@ STATE_KEYS = {
 }
 
 
-@pytest.mark.parametrize("name", ["forw", "forwinv", "in", "visin", "vcdn"])
+@pytest.mark.parametrize("name", ["forw", "forwinv", "in", "in_full", "visin", "vcdn"])
 def test_model_env_specs_and_state_keys(name: str, tiny_baseline) -> None:
     env = make_baseline_env(tiny_baseline(name))
     state = start_state(env)
@@ -102,6 +110,24 @@ def test_visin_state_carries_crop_features_of_the_current_image(tiny_baseline) -
     assert not torch.allclose(a[OBJECT_FEAT], b[OBJECT_FEAT])
 
 
+def test_in_full_state_carries_yaw_and_shape_and_needs_them(tiny_baseline) -> None:
+    env = ObjectModelEnv(tiny_baseline("in_full"))
+    state = start_state(env)
+    obs = observation(0)
+    yaw = torch.from_numpy(obs["object_yaw"])
+    assert state[OBJECT_FEAT].shape == (N, 10)
+    torch.testing.assert_close(state[OBJECT_FEAT][:, :2], torch.stack([yaw.cos(), yaw.sin()], -1))
+    with pytest.raises(KeyError, match="object_shape"):
+        env.observe(
+            torch.from_numpy(obs["pixels"]),
+            torch.from_numpy(obs["object_pos"]),
+            torch.from_numpy(obs["object_pos"]),
+            object_yaw=yaw,
+        )
+    observed = METHODS["model_mpc"].observes
+    assert OBJECT_YAW in observed and OBJECT_SHAPE in observed
+
+
 def test_in_env_planning_improves_the_goal_reward_over_random_actions(tiny_baseline) -> None:
     """CEM finds pushes whose predicted reward beats the mean of random pushes."""
     env = ObjectModelEnv(tiny_baseline("in"))
@@ -117,7 +143,7 @@ def test_in_env_planning_improves_the_goal_reward_over_random_actions(tiny_basel
     assert env.step(single)["next", "reward"].item() > random_reward.item()
 
 
-@pytest.mark.parametrize("name", ["forw", "forwinv", "in", "visin", "vcdn"])
+@pytest.mark.parametrize("name", ["forw", "forwinv", "in", "in_full", "visin", "vcdn"])
 def test_controller_acts_in_bounds_through_the_method_registry(name: str, tiny_baseline) -> None:
     settings = RearrangementSettings(methods=("model_mpc",), planner=PLANNER)
     context = MethodContext(tiny_baseline(name), SceneSettings(image_size=SIZE), settings, (0,))

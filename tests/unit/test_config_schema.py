@@ -53,12 +53,12 @@ def test_every_shipped_experiment_and_scale_passes(overrides: list[str]) -> None
 
 
 def test_keypoint_models_take_k_from_the_experiment_and_the_others_have_none() -> None:
-    """K = 6 on BlockObjs, 9 on YCBObjs (paper), for KINet and V-CDN; IN, VisIN, Forw, ForwInv of
-    the YCB tables compose without a keypoint count they would refuse."""
+    """K = 6 on BlockObjs, 9 on YCBObjs (paper), for KINet and V-CDN; IN, IN-full, VisIN, Forw,
+    ForwInv of the YCB tables compose without a keypoint count they would refuse."""
     for exp, k in (("blocks_topview", 6), ("ycb_sideview", 9), ("ycb_topview_vcdn", 9)):
         assert container(f"+exp={exp}")["model"]["num_keypoints"] == k
     assert container("+exp=ycb_sideview", "keypoints=12")["model"]["num_keypoints"] == 12
-    for baseline in ("in", "visin", "forw", "forwinv"):
+    for baseline in ("in", "in_full", "visin", "forw", "forwinv"):
         model = container(f"+exp=ycb_sideview_{baseline}")["model"]
         assert "num_keypoints" not in model and model["_target_"].startswith("kinet_rl.baselines")
     ycb = tables_settings("tables=cpu_ycb")

@@ -10,7 +10,8 @@ import pytest
 import torch
 from tensordict import TensorDict
 
-from fake_push_env import make_fake_env
+from fake_push_env import FakePushEnv, make_fake_env
+from kinet_rl.baselines import FullStateInteractionModel, ObjectInteractionModel
 from kinet_rl.data import (
     DatasetCorruptError,
     DatasetIncompleteError,
@@ -21,6 +22,8 @@ from kinet_rl.data import (
     load_dataset,
 )
 from kinet_rl.data.storage import EPISODES_DIR, METADATA_FILE
+from kinet_rl.evaluation.forward import start_frames
+from kinet_rl.pipeline import check_dataset_for
 
 H, T, N = 8, 4, 3
 ENV_CONFIG = {"task": "fake", "camera": "top", "image_size": H}
@@ -46,6 +49,10 @@ def test_transition_batch_has_documented_keys_shapes_dtypes(dataset_path: Path) 
         assert batch[key].shape == (32, H, H, 3) and batch[key].dtype == torch.uint8
     for key in ("object_pos", ("next", "object_pos")):
         assert batch[key].shape == (32, N, 2) and batch[key].dtype == torch.float32
+    for key in ("object_yaw", ("next", "object_yaw")):
+        assert batch[key].shape == (32, N) and batch[key].dtype == torch.float32
+    assert batch["object_shape"].shape == (32, N, 8)
+    assert torch.equal(batch["object_shape"][0], FakePushEnv(num_objects=N).object_shape())
     assert batch["action"].shape == (32, 4) and batch["action"].abs().max() <= 1
     assert batch["episode"].dtype == batch["step"].dtype == torch.int64
     assert batch["step"].max() < T
@@ -181,3 +188,50 @@ def test_episodes_in_memory_give_the_transitions_of_the_stored_dataset(dataset_p
     assert (in_memory.transitions(episode, step, horizon=2) == expected).all()
     with pytest.raises(ValueError, match=r"TensorDict \[E\] with E >= 1"):
         PushDataset.from_episodes(stored[0].to_tensordict())
+
+
+def as_old_format(path: Path) -> None:
+    """Turns a dataset into what kinet_rl wrote before it stored ``object_shape``."""
+    (path / EPISODES_DIR / "object_shape.memmap").unlink()
+    index = json.loads((path / EPISODES_DIR / "meta.json").read_text())
+    del index["object_shape"]
+    (path / EPISODES_DIR / "meta.json").write_text(json.dumps(index))
+    metadata = json.loads((path / METADATA_FILE).read_text())
+    del metadata["arrays"]
+    (path / METADATA_FILE).write_text(json.dumps(metadata))
+
+
+def test_sequences_and_start_frames_carry_yaw_and_shape(dataset_path: Path) -> None:
+    seq = load_dataset(dataset_path).sample_sequences(5, 3, torch.Generator().manual_seed(0))
+    assert seq["object_yaw"].shape == (5, 4, N) and seq["object_shape"].shape == (5, N, 8)
+    start = start_frames(seq)
+    assert torch.equal(start["object_yaw"], seq["object_yaw"][:, 0])
+    assert torch.equal(start["object_shape"], seq["object_shape"])
+
+
+def test_an_old_dataset_without_shapes_loads_for_in_and_is_refused_for_in_full(
+    tmp_path: Path,
+) -> None:
+    path = collect(tmp_path, "old", num_episodes=4)
+    assert json.loads((path / METADATA_FILE).read_text())["arrays"][-2:] == [
+        "object_shape",
+        "source_episode",
+    ]
+    as_old_format(path)
+    data = load_dataset(path, "all")
+    batch = data.sample(8, torch.Generator().manual_seed(0))
+    assert "object_shape" not in batch.keys() and batch["object_yaw"].shape == (8, N)  # noqa: SIM118
+    check_dataset_for(ObjectInteractionModel(num_objects=N), data)
+    ObjectInteractionModel(num_objects=N)(batch)  # IN trains on it
+    with pytest.raises(DatasetMismatchError, match=r"needs \['object_shape'\].*old.*collect it"):
+        check_dataset_for(FullStateInteractionModel(num_objects=N), data)
+    (path / EPISODES_DIR / "action.memmap").write_bytes(b"")  # still checked
+    with pytest.raises(DatasetCorruptError, match="action.memmap"):
+        load_dataset(path)
+
+
+def test_a_stored_shape_file_of_the_wrong_size_is_refused(tmp_path: Path) -> None:
+    path = collect(tmp_path, "bad", num_episodes=4)
+    (path / EPISODES_DIR / "object_shape.memmap").write_bytes(b"\0" * 12)
+    with pytest.raises(DatasetCorruptError, match="object_shape.memmap has 12 bytes"):
+        load_dataset(path)

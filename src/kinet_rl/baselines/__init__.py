@@ -1,5 +1,6 @@
 """Baselines of the KINet paper: Forw, ForwInv, IN, VisIN (Table I) and V-CDN, their model envs,
-and the oracle's analytic push model on ground-truth state.
+and the oracle's analytic push model on ground-truth state; IN-full, IN on the full
+ground-truth state (position, yaw and block geometry), is a stronger state-based ceiling.
 
 Each model is an ``nn.Module`` with a TorchRL loss, ``object_rollout(geometry)`` for
 forward-prediction evaluation and ``save_checkpoint``/``from_checkpoint``. See ``docs/baselines.md``.
@@ -27,6 +28,7 @@ from kinet_rl.baselines.model_env import (
     make_baseline_env,
 )
 from kinet_rl.baselines.object_models import (
+    FullStateInteractionModel,
     ObjectCountError,
     ObjectInteractionModel,
     ObjectStateRollout,
@@ -45,6 +47,7 @@ __all__ = [
     "EdgeTypeInference",
     "FeatureModelEnv",
     "FeatureObjectRollout",
+    "FullStateInteractionModel",
     "ImageForwardInverseModel",
     "ImageForwardLoss",
     "ImageForwardModel",

@@ -127,17 +127,19 @@ class ImageForwardLoss(LossModule):
 
 
 class ObjectForwardLoss(LossModule):
-    """Loss of IN and VisIN: squared error of the predicted next object positions.
+    """Loss of IN, IN-full and VisIN: squared error of the predicted next object positions.
 
     ``loss_fwd``: mean over the batch of ``sum_n |p_hat_n - p_n|^2`` in workspace units
     (``xy / half_size``), weighted by ``fwd_weight``.
 
     Keys:
         Reads a ``[B]`` batch with ``OBJECT_POS``, ``("next", OBJECT_POS)`` ``[B, N, 2]``,
-        ``ACTION`` ``[B, 4]`` and, for VisIN, ``PIXELS`` ``[B, H, W, 3]``. Returns ``loss_fwd``.
+        ``ACTION`` ``[B, 4]`` and, for VisIN, ``PIXELS`` ``[B, H, W, 3]``, for IN-full
+        ``OBJECT_YAW`` ``[B, N]`` and ``OBJECT_SHAPE`` ``[B, N, 8]``. Returns ``loss_fwd``.
 
     Args:
-        world_model: An :class:`ObjectInteractionModel` (IN) or ``VisualInteractionModel``.
+        world_model: An :class:`ObjectInteractionModel` (IN), ``FullStateInteractionModel`` or
+            ``VisualInteractionModel``.
         fwd_weight: Weight of ``loss_fwd``.
     """
 

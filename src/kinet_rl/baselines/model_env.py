@@ -2,8 +2,9 @@
 
 "For all baseline models, we perform MPC directly on the distance to the goal" (KINet, Sec. 5):
 
-* IN / VisIN (:class:`ObjectModelEnv`): state = ground-truth object positions (+ VisIN's crop
-  features of the current image, carried over while imagining); reward = minus the mean distance
+* IN / IN-full / VisIN (:class:`ObjectModelEnv`): state = ground-truth object positions (+ IN-full's
+  yaw and shape features, VisIN's crop features of the current image, carried over while
+  imagining); reward = minus the mean distance
   (metres) of the predicted object positions to the ground-truth goal positions.
 * Forw / ForwInv (:class:`FeatureModelEnv`): state = the whole-image feature ``z``; reward =
   ``-|z_hat - z_goal|^2`` with ``z_goal`` the feature of the goal image.
@@ -45,8 +46,8 @@ from kinet_rl.planners.model_env import StateModelEnv, check_goal_image
 
 
 class _PositionStep(nn.Module):
-    """One imagined push of positions with a carried context (IN/VisIN's crop features, V-CDN's
-    graph); reward: minus the mean distance of the predicted positions to the goal's."""
+    """One imagined push of positions with a carried context (IN-full/VisIN's node features,
+    V-CDN's graph); reward: minus the mean distance of the predicted positions to the goal's."""
 
     def __init__(self, model: nn.Module, predict: Callable[[Tensor, Tensor, Tensor], Tensor]):
         super().__init__()
@@ -73,16 +74,18 @@ class _FeatureStep(nn.Module):
 
 
 class ObjectModelEnv(StateModelEnv):
-    """Imagined pushes with IN or VisIN on ground-truth object positions.
+    """Imagined pushes with IN, IN-full or VisIN on ground-truth object positions.
 
     Keys:
         State/observation: ``OBJECT_POS`` ``[*B, N, 2]`` metres, ``OBJECT_FEAT`` ``[*B, N, F]``
-        (VisIN crop features of the current image, carried over; ``F = 0`` for IN) and
+        (the model's node features of the current state, carried over: IN-full's yaw and shape,
+        VisIN's crop features of the current image; ``F = 0`` for IN) and
         ``GOAL_OBJECT_POS`` ``[*B, N, 2]``. Action ``[*B, 4]`` in ``[-1, 1]``. Reward ``[*B, 1]``:
         minus the mean distance (metres) of the predicted positions to the goal positions.
 
     Args:
-        model: A (trained) :class:`ObjectInteractionModel` or :class:`VisualInteractionModel`.
+        model: A (trained) :class:`ObjectInteractionModel`, :class:`FullStateInteractionModel`
+            or :class:`VisualInteractionModel`.
     """
 
     def __init__(self, model: ObjectInteractionModel) -> None:
@@ -96,21 +99,30 @@ class ObjectModelEnv(StateModelEnv):
         self.model = model
 
     @torch.no_grad()
-    def observe(self, pixels: Tensor, object_pos: Tensor, goal_pos: Tensor) -> TensorDict:
-        """The start state: positions, their node features from ``pixels`` and the goal.
+    def observe(
+        self, pixels: Tensor, object_pos: Tensor, goal_pos: Tensor, **state: Tensor
+    ) -> TensorDict:
+        """The start state: positions, their node features and the goal.
 
         Args:
             pixels: uint8 ``[*B, H, W, 3]`` current images (used by VisIN only).
             object_pos: ``[*B, N, 2]`` ground-truth positions, metres.
             goal_pos: ``[*B, N, 2]`` goal positions, metres (or ``[N, 2]`` for all).
+            state: the model's ``state_keys`` entries ``[*B, N, ...]`` (IN-full: ``object_yaw``
+                and ``object_shape``).
         """
+        missing = [key for key in self.model.state_keys if key not in state]
+        if missing:
+            raise KeyError(
+                f"{type(self.model).__name__} plans from {list(self.model.state_keys)} as well; "
+                f"pass {missing} to observe() (the env observation has them)."
+            )
         pixels, object_pos = pixels.to(self.device), object_pos.to(self.device).float()
         batch = object_pos.shape[:-2]
+        entries = {PIXELS: pixels, OBJECT_POS: object_pos}
+        entries.update({key: state[key].to(self.device).float() for key in self.model.state_keys})
         flat = TensorDict(
-            {
-                PIXELS: pixels.reshape(-1, *pixels.shape[-3:]),
-                OBJECT_POS: object_pos.reshape(-1, *object_pos.shape[-2:]),
-            },
+            {key: value.reshape(-1, *value.shape[len(batch) :]) for key, value in entries.items()},
             batch_size=[batch.numel()],
         )
         self.model.eval()
@@ -201,7 +213,7 @@ class KeypointGraphModelEnv(StateModelEnv):
 def make_baseline_env(
     model: nn.Module,
 ) -> ObjectModelEnv | FeatureModelEnv | KeypointGraphModelEnv:
-    """The model env of a baseline: :class:`ObjectModelEnv` (IN/VisIN), :class:`FeatureModelEnv`
+    """The model env of a baseline: :class:`ObjectModelEnv` (IN/IN-full/VisIN), :class:`FeatureModelEnv`
     (Forw/ForwInv) or :class:`KeypointGraphModelEnv` (V-CDN)."""
     if isinstance(model, ObjectInteractionModel):
         return ObjectModelEnv(model)
@@ -210,6 +222,6 @@ def make_baseline_env(
     if isinstance(model, VCDNWorldModel):
         return KeypointGraphModelEnv(model)
     raise TypeError(
-        f"No baseline model env for {type(model).__name__}; model_mpc plans with IN, VisIN, Forw, "
-        "ForwInv or V-CDN (use the kinet_graph / kinet_keypoints methods for KINet)."
+        f"No baseline model env for {type(model).__name__}; model_mpc plans with IN, IN-full, VisIN, "
+        "Forw, ForwInv or V-CDN (use the kinet_graph / kinet_keypoints methods for KINet)."
     )

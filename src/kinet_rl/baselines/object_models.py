@@ -1,6 +1,6 @@
-"""IN and VisIN: interaction networks over a fixed, known set of ground-truth objects.
+"""IN, IN-full and VisIN: interaction networks over a fixed, known set of ground-truth objects.
 
-Both build a fully connected graph with one node per object, run ``L`` rounds of
+All build a fully connected graph with one node per object, run ``L`` rounds of
 action-conditioned message passing and predict each object's displacement (the deterministic
 :class:`~kinet_rl.models.interaction.KeypointInteractionNet`, fed object positions instead of
 keypoints). Positions are expressed in workspace units (``xy / half_size``), the frame of the push
@@ -8,6 +8,9 @@ action, so the push's start and end relative to each object are exact.
 
 IN's node state is the ground-truth position. Its velocity is left out: every recorded frame is
 taken after the scene has settled (objects at rest), so the velocity is identically zero there.
+IN-full's node state is the full ground-truth state: the position plus the yaw (as cos, sin) and
+the body-frame block geometry (``OBJECT_SHAPE``, two boxes, in workspace units); it predicts
+positions only, so in a rollout the start frame's yaw and shape are carried over.
 VisIN's node state is the position plus visual features of a fixed-size crop centred on the
 object's ground-truth position in the image; in a rollout, the start frame's crop features are
 carried over (no future images exist).
@@ -34,7 +37,7 @@ from kinet_rl.envs.geometry import (
     camera_projection,
 )
 from kinet_rl.envs.workspace import workspace_for
-from kinet_rl.keys import ACTION, NEXT_OBJECT_POS, OBJECT_POS, PIXELS
+from kinet_rl.keys import ACTION, NEXT_OBJECT_POS, OBJECT_POS, OBJECT_SHAPE, OBJECT_YAW, PIXELS
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.models.interaction import KeypointInteractionNet
 
@@ -66,8 +69,11 @@ class ObjectInteractionModel(ConfigCheckpointMixin, nn.Module):
     """
 
     checkpoint_format = "kinet_rl.ObjectInteractionModel/1"
-    #: Size of the per-object visual feature (none for IN).
+    #: Size of the per-object node feature (none for IN).
     node_feature_dim = 0
+    #: Entries of a state that :meth:`node_features` reads besides ``OBJECT_POS`` and ``PIXELS``
+    #: (observed by the env, stored by the dataset; planning hands them over).
+    state_keys: tuple[str, ...] = ()
 
     def __init__(
         self,
@@ -244,10 +250,51 @@ class VisualInteractionModel(ObjectInteractionModel):
         return ObjectStateRollout(self)
 
 
-class ObjectStateRollout:
-    """:class:`~kinet_rl.evaluation.forward.ObjectRollout` of IN/VisIN: open-loop on positions.
+class FullStateInteractionModel(ObjectInteractionModel):
+    """IN-full baseline: IN whose nodes also carry each object's yaw and block geometry.
 
-    Node features are computed once from the start frame and carried over.
+    Node features: ``cos(yaw)``, ``sin(yaw)`` and the 8 numbers of ``OBJECT_SHAPE`` divided by
+    the workspace half-size. It predicts positions only: in a multi-push rollout
+    (:class:`ObjectStateRollout`) the start frame's yaw and shape are carried over.
+
+    Keys:
+        :meth:`forward` reads ``OBJECT_POS`` ``[*B, N, 2]`` (metres), ``OBJECT_YAW`` ``[*B, N]``
+        (radians), ``OBJECT_SHAPE`` ``[*B, N, 8]`` (metres) and ``ACTION`` ``[*B, 4]``; writes
+        ``("next", OBJECT_POS)`` ``[*B, N, 2]`` (metres).
+
+    Args: as :class:`ObjectInteractionModel`.
+    """
+
+    checkpoint_format = "kinet_rl.FullStateInteractionModel/1"
+    node_feature_dim = 10
+    state_keys = (OBJECT_YAW, OBJECT_SHAPE)
+
+    def node_features(self, state: TensorDictBase) -> Tensor:
+        """``[*B, N, 10]``: cos and sin of ``OBJECT_YAW``, ``OBJECT_SHAPE`` in workspace units."""
+        missing = [key for key in self.state_keys if state.get(key, None) is None]
+        if missing:
+            raise KeyError(
+                f"{type(self).__name__} (IN-full) needs {list(self.state_keys)} in its input, "
+                f"missing {missing}. Datasets collected by an older kinet_rl lack object_shape: "
+                "delete the dataset folder and collect it again."
+            )
+        yaw, shape = state.get(OBJECT_YAW), state.get(OBJECT_SHAPE)
+        self.check_objects(state.get(OBJECT_POS))
+        if yaw.shape != shape.shape[:-1] or shape.shape[-1] != 8:
+            raise ValueError(
+                f"object_yaw must be [*B, N] and object_shape [*B, N, 8], got "
+                f"{tuple(yaw.shape)} and {tuple(shape.shape)}."
+            )
+        angle = torch.stack([yaw.cos(), yaw.sin()], dim=-1)
+        return torch.cat([angle, shape / self.position_scale], dim=-1)
+
+
+class ObjectStateRollout:
+    """:class:`~kinet_rl.evaluation.forward.ObjectRollout` of IN/IN-full/VisIN: open-loop on
+    positions.
+
+    Node features (IN-full's yaw and shape, VisIN's crops) are computed once from the start frame
+    and carried over.
     """
 
     def __init__(self, model: ObjectInteractionModel) -> None:

@@ -4,7 +4,8 @@ For fast tests and smoke runs of forward models, without MuJoCo stepping or rend
 of fixed colours (one per object index) lie on a grey table seen by the blocks task's top camera;
 a push moves every square whose centre lies within ``object_half_size`` of the push line, ahead of
 the push start and within reach, along the push until the pusher's end point (no
-object-object contact). Pushes mix aimed pushes (through a random object) and uniform ones, like
+object-object contact); squares do not turn (yaw 0), and each one's ``object_shape`` is its square
+given twice. Pushes mix aimed pushes (through a random object) and uniform ones, like
 :class:`~kinet_rl.data.RandomPushPolicy`. ``sample`` and ``sample_sequences`` return the same
 entries as :func:`kinet_rl.data.load_dataset` splits.
 """
@@ -18,7 +19,16 @@ from torch import Tensor
 from kinet_rl.data.dataset import sample_steps
 from kinet_rl.envs.geometry import SceneGeometry
 from kinet_rl.envs.workspace import workspace_for
-from kinet_rl.keys import ACTION, EPISODE, OBJECT_POS, PIXELS, PIXELS_0, STEP
+from kinet_rl.keys import (
+    ACTION,
+    EPISODE,
+    OBJECT_POS,
+    OBJECT_SHAPE,
+    OBJECT_YAW,
+    PIXELS,
+    PIXELS_0,
+    STEP,
+)
 
 COLOURS = torch.tensor(
     [[220, 40, 40], [40, 190, 40], [40, 60, 220], [220, 200, 40], [200, 40, 200]],
@@ -98,6 +108,8 @@ class ToyPushData:
             actions.append(torch.cat([start, end], dim=-1) / workspace)
         self.object_pos = torch.stack(positions, dim=1)  # [E, T+1, N, 2]
         self.action = torch.stack(actions, dim=1)  # [E, T, 4]
+        square = torch.tensor([0.0, 0.0, object_half_size, object_half_size]).repeat(2)
+        self.object_shape = square.expand(num_episodes, num_objects, 8)  # [E, N, 8]
         projection = self.geometry.projection  # looks straight down from above the origin
         depth = float(projection.position[2]) - self.geometry.object_height
         px_per_metre = image_size / 2 / (depth * projection.tan_half_fovy)
@@ -138,6 +150,8 @@ class ToyPushData:
                 PIXELS_0: self.pixels[episode, 0],
                 ACTION: self.action[episode, step],
                 OBJECT_POS: self.object_pos[episode, step],
+                OBJECT_YAW: self.object_pos.new_zeros(*episode.shape, self.object_pos.shape[2]),
+                OBJECT_SHAPE: self.object_shape[episode],
                 EPISODE: episode,
                 STEP: step,
                 "next": {
@@ -163,7 +177,8 @@ class ToyPushData:
     def sample_sequences(
         self, batch_size: int, length: int, generator: torch.Generator | None = None
     ) -> TensorDict:
-        """``batch_size`` random windows of ``length`` pushes: pixels/object_pos ``[B, L+1, ...]``."""
+        """``batch_size`` random windows of ``length`` pushes: pixels/object_pos/object_yaw
+        ``[B, L+1, ...]``, object_shape ``[B, N, 8]``."""
         if not 1 <= length <= self.action.shape[1]:
             raise ValueError(f"length must be in [1, {self.action.shape[1]}], got {length}.")
         episode = torch.randint(self.action.shape[0], (batch_size,), generator=generator)
@@ -175,6 +190,8 @@ class ToyPushData:
                 PIXELS_0: self.pixels[episode, 0],
                 ACTION: self.action[episode[:, None], frames[:, :-1]],
                 OBJECT_POS: self.object_pos[episode[:, None], frames],
+                OBJECT_YAW: self.object_pos.new_zeros(*frames.shape, self.object_pos.shape[2]),
+                OBJECT_SHAPE: self.object_shape[episode],
                 EPISODE: episode,
                 STEP: first,
             },

@@ -36,6 +36,7 @@ from kinet_rl.keys import (
     NEXT_OBJECT_POS,
     NEXT_PIXELS,
     OBJECT_POS,
+    OBJECT_SHAPE,
     OBJECT_YAW,
     PIXELS,
     UNSTABLE,
@@ -116,6 +117,7 @@ def assemble_episode(rows: TensorDictBase, episode_length: int) -> TensorDictBas
             ACTION: rows.get(ACTION),
             OBJECT_POS: torch.cat([rows.get(OBJECT_POS), last.get(NEXT_OBJECT_POS)[None]]),
             OBJECT_YAW: torch.cat([rows.get(OBJECT_YAW), last.get(("next", OBJECT_YAW))[None]]),
+            OBJECT_SHAPE: rows.get(OBJECT_SHAPE)[0],  # constant within the episode
             "source_episode": rows.get(EPISODE_ID)[0, 0],
         }
     )
@@ -369,6 +371,7 @@ def collect_dataset(
                 "backend": backend,
                 "discarded_unstable": discarded,
                 "processed_episodes": writer.processed,
+                "arrays": list(writer.specs),
                 "versions": package_versions(),
                 "collection_seconds_last_run": time.perf_counter() - start,
             }

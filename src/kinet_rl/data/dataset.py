@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -21,8 +21,8 @@ from kinet_rl.data.storage import (
     DatasetMismatchError,
     DatasetNotFoundError,
     check_array_files,
-    episode_array_specs,
     read_json,
+    stored_array_specs,
 )
 from kinet_rl.keys import (
     ACTION,
@@ -30,6 +30,8 @@ from kinet_rl.keys import (
     FUTURE_ACTION,
     FUTURE_PIXELS,
     OBJECT_POS,
+    OBJECT_SHAPE,
+    OBJECT_YAW,
     PIXELS,
     PIXELS_0,
     STEP,
@@ -111,10 +113,7 @@ class PushDataset:
         if split not in splits:
             raise ValueError(f"Unknown split {split!r}; {path} has {sorted(splits)}.")
         self.split = split
-        specs = episode_array_specs(
-            metadata["episode_length"], metadata["image_size"], metadata["num_objects"]
-        )
-        check_array_files(path, metadata["num_episodes"], specs)
+        check_array_files(path, metadata["num_episodes"], stored_array_specs(metadata))
         try:
             stored = TensorDict.load_memmap(path / EPISODES_DIR)
         except Exception as err:  # tensordict raises several types for a damaged folder
@@ -154,8 +153,38 @@ class PushDataset:
         self._frames = _rows(stored[PIXELS])  # [E * (T+1), H * W * 3]
         self._actions = _rows(stored[ACTION])  # [E * T, 4]
         self._object_pos = _rows(stored[OBJECT_POS])  # [E * (T+1), N * 2]
+        self._object_yaw = _rows(stored[OBJECT_YAW])  # [E * (T+1), N]
+        shapes = stored.get(OBJECT_SHAPE, None)  # absent from datasets of older versions
+        self._object_shape = None if shapes is None else shapes.as_subclass(torch.Tensor)
+        self.stored_keys = frozenset(stored.keys())
         self.episode_start, self.episode_stop = start, stop
         self.num_episodes = stop - start
+
+    def check_keys(self, keys: Iterable[str], user: str) -> None:
+        """Raises :class:`DatasetMismatchError` if the dataset stores no array ``user`` needs.
+
+        Args:
+            keys: the stored arrays (e.g. ``OBJECT_SHAPE``) that ``user`` reads.
+            user: who needs them, for the message (e.g. the model's class name).
+        """
+        missing = sorted(set(keys) - self.stored_keys)
+        if not missing:
+            return
+        if self.path is None:
+            raise DatasetMismatchError(
+                f"{user} needs {missing}, which these in-memory episodes lack; assemble them "
+                "from an env that observes them (kinet_rl.envs.make_env does)."
+            )
+        raise DatasetMismatchError(
+            f"{user} needs {missing}, which dataset {self.path} does not store (it was collected "
+            f"by an older kinet_rl). Delete {self.path} and collect it again: {COLLECT_HINT}"
+        )
+
+    def _shapes(self, episode: torch.Tensor) -> dict[str, torch.Tensor]:
+        """``{OBJECT_SHAPE: [B, N, 8]}`` of ``episode`` [B], or ``{}`` if the dataset has none."""
+        if self._object_shape is None:
+            return {}
+        return {OBJECT_SHAPE: self._object_shape.index_select(0, episode)}
 
     def __len__(self) -> int:
         """Number of transitions in the split."""
@@ -169,7 +198,8 @@ class PushDataset:
         Returns:
             TensorDict [B]: ``pixels_0``, ``pixels``, (``next``, ``pixels``) uint8 [B, H, W, 3];
             ``action`` [B, 4]; ``object_pos``, (``next``, ``object_pos``) [B, N, 2];
-            ``episode``, ``step`` int64 [B]. With ``horizon`` > 1 (``step + horizon`` within the
+            ``object_yaw``, (``next``, ``object_yaw``) [B, N]; ``object_shape`` [B, N, 8] (when
+            the dataset stores it); ``episode``, ``step`` int64 [B]. With ``horizon`` > 1 (``step + horizon`` within the
             episode) also the ``horizon - 1`` pushes that follow: (``future``, ``action``)
             [B, horizon - 1, 4] and the frames after them, (``future``, ``pixels``)
             [B, horizon - 1, H, W, 3].
@@ -179,15 +209,18 @@ class PushDataset:
         rows = self._frame_rows(episode[:, None], times)  # [B, 3]
         frames = self._frames.index_select(0, rows.reshape(-1)).view(batch, 3, h, h, 3)
         pos = self._object_pos.index_select(0, rows[:, 1:].reshape(-1)).view(batch, 2, n, 2)
+        yaw = self._object_yaw.index_select(0, rows[:, 1:].reshape(-1)).view(batch, 2, n)
         out = TensorDict(
             {
                 PIXELS_0: frames[:, 0],
                 PIXELS: frames[:, 1],
                 ACTION: self._actions.index_select(0, episode * self.episode_length + step),
                 OBJECT_POS: pos[:, 0],
+                OBJECT_YAW: yaw[:, 0],
+                **self._shapes(episode),
                 EPISODE: episode,
                 STEP: step,
-                "next": {PIXELS: frames[:, 2], OBJECT_POS: pos[:, 1]},
+                "next": {PIXELS: frames[:, 2], OBJECT_POS: pos[:, 1], OBJECT_YAW: yaw[:, 1]},
             },
             batch_size=[batch],
         )
@@ -243,7 +276,8 @@ class PushDataset:
 
         Returns:
             TensorDict [B]: ``pixels`` uint8 [B, L+1, H, W, 3] (frames before each push and after
-            the last), ``action`` [B, L, 4], ``object_pos`` [B, L+1, N, 2], ``pixels_0``
+            the last), ``action`` [B, L, 4], ``object_pos`` [B, L+1, N, 2], ``object_yaw``
+            [B, L+1, N], ``object_shape`` [B, N, 8] (when the dataset stores it), ``pixels_0``
             [B, H, W, 3] (the episode's first frame), ``episode`` and ``step`` (first push) [B].
         """
         if not 1 <= length <= self.episode_length:
@@ -262,6 +296,8 @@ class PushDataset:
                 OBJECT_POS: self._object_pos.index_select(0, rows).view(
                     batch_size, length + 1, n, 2
                 ),
+                OBJECT_YAW: self._object_yaw.index_select(0, rows).view(batch_size, length + 1, n),
+                **self._shapes(episode),
                 PIXELS_0: self._frames.index_select(0, first_rows).view(batch_size, h, h, 3),
                 EPISODE: episode,
                 STEP: step,

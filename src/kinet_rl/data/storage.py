@@ -7,10 +7,15 @@ Layout of ``<root>/<name>/``::
       action.memmap          float32 [E, T, 4]
       object_pos.memmap      float32 [E, T+1, N, 2]
       object_yaw.memmap      float32 [E, T+1, N]
+      object_shape.memmap    float32 [E, N, 8]  body-frame footprints, one per episode (optional)
       source_episode.memmap  int64 [E]  episode index within the collection run
       meta.json              tensordict's own shapes and dtypes
     progress.json      committed episodes, processed (kept + discarded) source episodes, settings
-    metadata.json      written last, atomically: its presence marks the dataset complete
+    metadata.json      written last, atomically: its presence marks the dataset complete;
+                       ``arrays`` lists the stored arrays
+
+Datasets collected before ``object_shape`` was stored have no ``arrays`` entry and no such file;
+they load for every model that does not need the shapes (see :data:`OPTIONAL_ARRAYS`).
 """
 
 from __future__ import annotations
@@ -27,7 +32,7 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 
 from kinet_rl.atomic import DISK_FULL_ERRNOS, DiskFullError, atomic_write_json
-from kinet_rl.keys import ACTION, OBJECT_POS, OBJECT_YAW, PIXELS
+from kinet_rl.keys import ACTION, OBJECT_POS, OBJECT_SHAPE, OBJECT_YAW, PIXELS
 
 logger = logging.getLogger(__name__)
 
@@ -36,6 +41,8 @@ PROGRESS_FILE = "progress.json"
 METADATA_FILE = "metadata.json"
 FORMAT_VERSION = 1
 COLLECT_HINT = "python -m kinet_rl.collect [+exp=<experiment>] data.root=<root> data.name=<name>"
+#: Arrays that datasets of older kinet_rl versions lack (their metadata has no ``arrays``).
+OPTIONAL_ARRAYS = (OBJECT_SHAPE,)
 
 
 class DatasetError(Exception):
@@ -98,8 +105,20 @@ def episode_array_specs(
         ACTION: ((t, 4), torch.float32),
         OBJECT_POS: ((t + 1, n, 2), torch.float32),
         OBJECT_YAW: ((t + 1, n), torch.float32),
+        OBJECT_SHAPE: ((n, 8), torch.float32),
         "source_episode": ((), torch.int64),
     }
+
+
+def stored_array_specs(
+    metadata: Mapping[str, Any],
+) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
+    """:func:`episode_array_specs` of the arrays a complete dataset's ``metadata`` says it stores."""
+    specs = episode_array_specs(
+        metadata["episode_length"], metadata["image_size"], metadata["num_objects"]
+    )
+    names = metadata.get("arrays", [name for name in specs if name not in OPTIONAL_ARRAYS])
+    return {name: spec for name, spec in specs.items() if name in names}
 
 
 def check_array_files(path: Path, num_episodes: int, specs: Mapping[str, Any]) -> None:

@@ -57,6 +57,11 @@ class BlockGeometry:
         high = np.max(self.positions[:, :2] + self.sizes[:, :2], axis=0)
         return (low + high) / 2.0, (high - low) / 2.0
 
+    @property
+    def planar_boxes(self) -> np.ndarray:
+        """``[2, 4]`` body-frame footprints of the cuboids: (centre x, centre y, half x, half y)."""
+        return np.concatenate([self.positions[:, :2], self.sizes[:, :2]], axis=1)
+
 
 def sample_block_geometry(random: np.random.RandomState, geometry: str) -> BlockGeometry:
     """Draw a two-cuboid block from the ``"train"`` or ``"gen"`` size range."""

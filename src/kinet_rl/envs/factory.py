@@ -115,7 +115,8 @@ def make_env(
     """Build the TorchRL pushing environment (a ``DMControlWrapper``).
 
     Keys: ``pixels`` uint8 ``[H, W, 3]``, ``object_pos`` float32 ``[N, 2]``, ``object_yaw``
-    float32 ``[N]``, ``unstable`` bool ``[1]``; ``action`` float32 ``[4]`` in [-1, 1].
+    float32 ``[N]``, ``object_shape`` float32 ``[N, 8]``, ``unstable`` bool ``[1]``; ``action``
+    float32 ``[4]`` in [-1, 1].
     With ``max_steps`` a ``StepCounter`` truncates episodes after that many pushes.
 
     Args: as :func:`make_dm_env`, plus ``max_steps`` (``None``: no step limit) and ``device``.

@@ -14,7 +14,7 @@ import numpy as np
 from gymnasium import spaces
 
 from kinet_rl.envs.factory import make_dm_env
-from kinet_rl.keys import OBJECT_POS, OBJECT_YAW, PIXELS, UNSTABLE
+from kinet_rl.keys import OBJECT_POS, OBJECT_SHAPE, OBJECT_YAW, PIXELS, UNSTABLE
 
 __all__ = ["PushGymEnv", "register_gym_envs", "GYM_IDS"]
 
@@ -25,7 +25,7 @@ class PushGymEnv(gymnasium.Env):
     """Gymnasium view of the dm_control pushing environment.
 
     Observation: ``Dict(pixels uint8 [H, W, 3], object_pos float32 [N, 2], object_yaw float32 [N],
-    unstable MultiBinary(1))``; action: ``Box(-1, 1, (4,), float32)``. ``terminated`` is true when
+    object_shape float32 [N, 8], unstable MultiBinary(1))``; action: ``Box(-1, 1, (4,), float32)``. ``terminated`` is true when
     the simulation went unstable.
     """
 
@@ -46,6 +46,7 @@ class PushGymEnv(gymnasium.Env):
                 PIXELS: spaces.Box(0, 255, (size, size, 3), np.uint8),
                 OBJECT_POS: spaces.Box(-10.0, 10.0, (num, 2), np.float32),
                 OBJECT_YAW: spaces.Box(-np.pi, np.pi, (num,), np.float32),
+                OBJECT_SHAPE: spaces.Box(-1.0, 1.0, (num, 8), np.float32),
                 UNSTABLE: spaces.MultiBinary(1),
             }
         )

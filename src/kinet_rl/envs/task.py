@@ -26,7 +26,7 @@ from kinet_rl.envs.placement import sample_placements
 from kinet_rl.envs.scene import PUSHER_HALF_LENGTH, PUSHER_PARK, PUSHER_RADIUS, SceneLayout
 from kinet_rl.envs.workspace import Workspace
 from kinet_rl.envs.ycb import YcbObject
-from kinet_rl.keys import OBJECT_POS, OBJECT_YAW, PIXELS, UNSTABLE
+from kinet_rl.keys import OBJECT_POS, OBJECT_SHAPE, OBJECT_YAW, PIXELS, UNSTABLE
 
 __all__ = ["PushPhysics", "PushObjects", "PushSettings"]
 
@@ -119,8 +119,10 @@ class PushObjects(base.Task):
     """Push 1 to 5 objects on a table with a capsule pusher, one push per step.
 
     Observations: ``pixels`` uint8 ``[H, W, 3]`` from the chosen camera; for evaluation only,
-    ``object_pos`` float32 ``[N, 2]`` (metres, table frame), ``object_yaw`` float32 ``[N]`` and
-    ``unstable`` bool ``[1]``. An unstable simulation (NaN state, MuJoCo's bad-acceleration
+    ``object_pos`` float32 ``[N, 2]`` (metres, table frame), ``object_yaw`` float32 ``[N]``,
+    ``object_shape`` float32 ``[N, 8]`` (the episode's body-frame footprints as two boxes, see
+    :data:`~kinet_rl.keys.OBJECT_SHAPE`: a block's two cuboids, a YCB object's bounding box twice)
+    and ``unstable`` bool ``[1]``. An unstable simulation (NaN state, MuJoCo's bad-acceleration
     reset, a blown-up contact, an object off the table) ends the episode with ``unstable``
     set, increments :attr:`unstable_count` and logs a warning.
 
@@ -172,6 +174,7 @@ class PushObjects(base.Task):
         self.active: tuple[str, ...] = layout.object_bodies[:num_objects]
         self._footprint = np.zeros((num_objects, 2))  # body-frame footprint half extents
         self._footprint_offset = np.zeros((num_objects, 2))  # and centre
+        self._shape = np.zeros((num_objects, 8), dtype=np.float32)  # OBJECT_SHAPE
         self._rest_height = np.zeros(num_objects)
         self._object_height = np.zeros(num_objects)
 
@@ -228,6 +231,7 @@ class PushObjects(base.Task):
             blocks.apply_block_geometry(model.ptr, model.name2id(body, "body"), geom_ids, block)
             model.geom_rgba[list(geom_ids)] = colors[i]
             self._footprint_offset[i], self._footprint[i] = block.footprint
+            self._shape[i] = block.planar_boxes.reshape(8)
             self._rest_height[i] = block.sizes[0, 2]
             self._object_height[i] = 2.0 * block.sizes[0, 2]
         mujoco.mj_setConst(model.ptr, physics.data.ptr)
@@ -248,6 +252,8 @@ class PushObjects(base.Task):
                 physics.named.data.qpos[body] = [-3.0 - index, 3.0, 1.0, 1.0, 0.0, 0.0, 0.0]
         objects = [candidates[i] for i in chosen]
         self._footprint = np.stack([o.half_extents[:2] for o in objects])
+        box = np.concatenate([self._footprint_offset, self._footprint], axis=1)  # [N, 4]
+        self._shape = np.tile(box, 2).astype(np.float32)  # the footprint box twice
         self._rest_height = np.array([o.rest_height for o in objects])
         self._object_height = 2.0 * self._rest_height
 
@@ -427,12 +433,13 @@ class PushObjects(base.Task):
 
     # ----------------------------------------------------------------- observations
     def get_observation(self, physics: PushPhysics) -> dict[str, np.ndarray]:
-        """Pixels from the task's camera plus ground-truth poses and the ``unstable`` flag."""
+        """Pixels from the task's camera plus ground-truth poses, shapes and the ``unstable`` flag."""
         xy, yaw = self.object_poses(physics)
         return {
             PIXELS: self.render(physics),
             OBJECT_POS: xy,
             OBJECT_YAW: yaw,
+            OBJECT_SHAPE: self._shape.copy(),
             UNSTABLE: np.array([self._unstable]),
         }
 

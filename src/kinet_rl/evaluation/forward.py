@@ -17,7 +17,7 @@ from torch import Tensor
 from kinet_rl.devices import model_device
 from kinet_rl.envs.geometry import SceneGeometry, normalised_to_pixels
 from kinet_rl.evaluation.metrics import keypoint_hit_rate
-from kinet_rl.keys import ACTION, OBJECT_POS, PIXELS, PIXELS_0
+from kinet_rl.keys import ACTION, OBJECT_POS, OBJECT_SHAPE, OBJECT_YAW, PIXELS, PIXELS_0
 
 
 @torch.no_grad()
@@ -48,7 +48,8 @@ class ObjectRollout(Protocol):
     """What forward-prediction evaluation asks of any model (KINet, baselines, user models).
 
     Called with a ``[B]`` TensorDict of the frame where prediction starts (``pixels``,
-    ``pixels_0``, ``object_pos``: ground truth of the start frame only) and ``[B, L, 4]`` pushes;
+    ``pixels_0``, ``object_pos`` and, where the data have them, ``object_yaw`` and
+    ``object_shape``: ground truth of the start frame only) and ``[B, L, 4]`` pushes;
     returns ``[B, L, N, 2]`` predicted object positions (metres, table frame) after each push.
     """
 
@@ -57,7 +58,7 @@ class ObjectRollout(Protocol):
 
 def start_frames(seq: TensorDictBase) -> TensorDictBase:
     """The ``[B]`` start-frame TensorDict of a sequence batch (see :class:`ObjectRollout`)."""
-    return TensorDict(
+    start = TensorDict(
         {
             PIXELS: seq[PIXELS][:, 0],
             PIXELS_0: seq[PIXELS_0],
@@ -65,6 +66,12 @@ def start_frames(seq: TensorDictBase) -> TensorDictBase:
         },
         batch_size=seq.batch_size,
     )
+    yaw, shape = seq.get(OBJECT_YAW, None), seq.get(OBJECT_SHAPE, None)
+    if yaw is not None:
+        start[OBJECT_YAW] = yaw[:, 0]
+    if shape is not None:
+        start[OBJECT_SHAPE] = shape
+    return start
 
 
 #: An object counts as moved by a push (or pushes) when its centre moved more than this, metres.

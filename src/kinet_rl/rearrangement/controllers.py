@@ -6,7 +6,7 @@ Episode ``i`` samples from its own seeded generator, so it gets the pushes it wo
 to floating-point rounding of the batched arithmetic).
 
 Learned-model controllers see only what a real robot would: KINet's sees camera images; the
-GT-state baselines (IN, VisIN) and the oracle see the simulator's object positions, which is
+GT-state baselines (IN, IN-full, VisIN) and the oracle see the simulator's object state, which is
 what makes them ceilings rather than peers.
 """
 
@@ -105,9 +105,9 @@ class BaselineMPCController:
     """MPC on the distance to the goal with a baseline model.
 
     "For all baseline models, we perform MPC directly on the distance to the goal" (KINet, Sec. 5):
-    IN/VisIN plan on the true object positions towards the true goal positions; Forw/ForwInv
-    plan on image features towards the goal image's feature; V-CDN on its keypoints towards the
-    goal image's keypoints.
+    IN/IN-full/VisIN plan on the true object state (IN-full: also yaw and shape) towards the
+    true goal positions; Forw/ForwInv plan on image features towards the goal image's feature;
+    V-CDN on its keypoints towards the goal image's keypoints.
 
     Args:
         model: A baseline model (see :func:`~kinet_rl.baselines.make_baseline_env`).
@@ -128,7 +128,8 @@ class BaselineMPCController:
         self.planner.reset()
 
     def act(self, observations: Observations) -> np.ndarray:
-        """Plans from the current observations (``pixels``, ``object_pos``)."""
+        """Plans from the current observations (``pixels``, ``object_pos``; IN-full also
+        ``object_yaw``, ``object_shape``)."""
         if not self.episodes:
             raise RuntimeError(
                 "BaselineMPCController.act called before reset(episodes); reset it first."
@@ -139,7 +140,8 @@ class BaselineMPCController:
             goal = torch.as_tensor(
                 np.stack([e.goal_pos for e in self.episodes]), dtype=torch.float32
             )
-            state = self.env.observe(pixels, pos, goal)
+            extra = {key: stacked(observations, key) for key in self.env.model.state_keys}
+            state = self.env.observe(pixels, pos, goal, **extra)
         else:
             goal_pixels = torch.from_numpy(np.stack([e.goal_pixels for e in self.episodes]))
             state = self.env.observe(pixels, goal_pixels)

@@ -2,7 +2,7 @@
 
 A method's controller factory gets a :class:`MethodContext` (the model, the episodes' scene, the
 settings and the episode seeds: one controller plans for a batch of episodes). ``needs`` says
-which model a method plans with: ``"kinet"`` (a :class:`~kinet_rl.models.KINetWorldModel`), ``"baseline"`` (IN, VisIN, Forw, ForwInv or V-CDN) or
+which model a method plans with: ``"kinet"`` (a :class:`~kinet_rl.models.KINetWorldModel`), ``"baseline"`` (IN, IN-full, VisIN, Forw, ForwInv or V-CDN) or
 ``None`` (random pushes and the oracle need no model).
 """
 
@@ -16,7 +16,7 @@ from torch import nn
 
 from kinet_rl.envs.settings import SceneSettings
 from kinet_rl.envs.workspace import workspace_for
-from kinet_rl.keys import OBJECT_POS, PIXELS
+from kinet_rl.keys import OBJECT_POS, OBJECT_SHAPE, OBJECT_YAW, PIXELS
 from kinet_rl.models.model_env import (
     GraphDistanceReward,
     GraphSimilarityReward,
@@ -61,7 +61,8 @@ class Method:
         make_controller: Builds its controller for a batch of episodes.
         observes: The observation entries its controller is handed each step: learned-model
             controllers see only what a real robot's camera gives (``pixels``); the GT-state
-            baselines and the oracle also get ``object_pos``.
+            baselines also get ``object_pos``, ``object_yaw`` and ``object_shape``, the oracle
+            ``object_pos``.
     """
 
     name: str
@@ -157,7 +158,8 @@ METHODS: dict[str, Method] = {
             lambda ctx: BaselineMPCController(
                 cast(nn.Module, ctx.model), ctx.settings.planner, ctx.seeds
             ),
-            (PIXELS, OBJECT_POS),  # IN/VisIN plan on GT positions (Forw/ForwInv/V-CDN: pixels only)
+            # IN/IN-full/VisIN plan on GT state (Forw/ForwInv/V-CDN: pixels only)
+            (PIXELS, OBJECT_POS, OBJECT_YAW, OBJECT_SHAPE),
         ),
     )
 }
