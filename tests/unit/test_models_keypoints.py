@@ -52,6 +52,24 @@ def test_detector_rejects_bad_images(detector, shape, dtype, match):
         detector(torch.zeros(shape, dtype=dtype))
 
 
+def test_half_resolution_heatmaps_pool_features_over_the_quarter_resolution_map():
+    torch.manual_seed(0)
+    detector = KeypointDetector(num_keypoints=3, feat_dim=5, channels=8, heatmap_stride=2)
+    enc = detector.encode(torch.rand(2, 16, 16, 3))
+    logits = detector.heatmap_head(enc.coarse, enc.fine)
+    assert logits.shape == (2, 3, 8, 8)  # 1/2 of the image, where the coarse map is 4x4
+    pos, heat = spatial_soft_argmax(logits)
+    torch.testing.assert_close(enc.pos, pos)
+    cell_share = heat.reshape(2, 3, 4, 2, 4, 2).sum(dim=(3, 5))  # each 2x2 block of a coarse cell
+    pooled = torch.einsum("nkhw,nchw->nkc", cell_share, enc.coarse)
+    torch.testing.assert_close(enc.feat, detector.feat_head(pooled))
+
+
+def test_a_heatmap_stride_other_than_4_or_2_is_named():
+    with pytest.raises(ValueError, match=r"heatmap_stride=8; choose one of \(4, 2\)"):
+        KeypointDetector(heatmap_stride=8)
+
+
 def test_soft_argmax_convention_x_right_y_down():
     logits = torch.full((1, 1, 8, 8), -50.0)
     logits[0, 0, 1, 6] = 50.0  # row 1 (top), column 6 (right)

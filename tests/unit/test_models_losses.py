@@ -14,7 +14,9 @@ from kinet_rl.models import KINetLoss, KINetWorldModel, graph_info_nce
 LOSS_NAMES = ("loss_rec", "loss_fwd", "loss_kl", "loss_ctr")
 
 
-def make_model(deterministic: bool = False, feature_grad: str = "head") -> KINetWorldModel:
+def make_model(
+    deterministic: bool = False, feature_grad: str = "head", heatmap_stride: int = 4
+) -> KINetWorldModel:
     torch.manual_seed(0)
     return KINetWorldModel(
         num_keypoints=3,
@@ -26,6 +28,7 @@ def make_model(deterministic: bool = False, feature_grad: str = "head") -> KINet
         num_rounds=2,
         deterministic=deterministic,
         feature_grad=feature_grad,
+        heatmap_stride=heatmap_stride,
     )
 
 
@@ -77,8 +80,9 @@ def without(module: torch.nn.Module, *skip: torch.nn.Module) -> torch.nn.ModuleL
     return torch.nn.ModuleList([rest])
 
 
-def test_forward_losses_train_the_features_but_never_move_the_keypoints():
-    model = make_model()
+@pytest.mark.parametrize("heatmap_stride", [4, 2])
+def test_forward_losses_train_the_features_but_never_move_the_keypoints(heatmap_stride):
+    model = make_model(heatmap_stride=heatmap_stride)
     losses = KINetLoss(model, kl_weight=1.0, ctr_weight=1.0)(batch())
     detector, interaction = model.detector, model.interaction
     assert grad_norms(losses["loss_rec"], detector) > 0
@@ -91,13 +95,14 @@ def test_forward_losses_train_the_features_but_never_move_the_keypoints():
         assert grad_norms(losses[name], model.reconstructor) == 0, name
 
 
-def test_every_trainable_parameter_gets_a_gradient():
+@pytest.mark.parametrize("heatmap_stride", [4, 2])
+def test_every_trainable_parameter_gets_a_gradient(heatmap_stride):
     for feature_grad in ("head", "encoder"):
-        model = make_model(feature_grad=feature_grad)
+        model = make_model(feature_grad=feature_grad, heatmap_stride=heatmap_stride)
         losses = KINetLoss(model, kl_weight=1.0, ctr_weight=1.0)(batch())
         sum(losses.values()).backward()
         dead = [n for n, p in model.named_parameters() if p.grad is None or not p.grad.any()]
-        assert not dead, (feature_grad, dead)
+        assert not dead, (feature_grad, heatmap_stride, dead)
 
 
 def test_encoder_features_reach_the_encoder_but_not_the_heatmaps():

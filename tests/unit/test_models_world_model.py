@@ -130,6 +130,20 @@ def test_checkpoint_round_trip(model, tmp_path):
     assert not list(path.parent.glob(".*tmp"))  # atomic write leaves no temporary file
 
 
+def test_half_resolution_heatmaps_survive_a_checkpoint_and_old_files_load_as_stride_4(tmp_path):
+    torch.manual_seed(0)
+    model = KINetWorldModel(**CONFIG, heatmap_stride=2).eval()
+    model.save_checkpoint(tmp_path / "half.pt")
+    loaded = KINetWorldModel.from_checkpoint(tmp_path / "half.pt").eval()
+    pixels = transitions()[PIXELS]
+    assert loaded.detector.heatmap_stride == 2
+    torch.testing.assert_close(loaded.detector(pixels), model.detector(pixels))
+    old = KINetWorldModel(**CONFIG)
+    del old.config["heatmap_stride"]  # a file written before the option existed
+    old.save_checkpoint(tmp_path / "old.pt")
+    assert KINetWorldModel.from_checkpoint(tmp_path / "old.pt").detector.heatmap_stride == 4
+
+
 def test_checkpoint_truncated_or_corrupt_file_is_refused(model, tmp_path):
     path = tmp_path / "model.pt"
     model.save_checkpoint(path)

@@ -85,6 +85,9 @@ def gaussian_maps(pos: Tensor, height: int, width: int, std: float) -> Tensor:
 #: How far the gradients of keypoint features reach into the detector.
 FEATURE_GRADS = ("none", "head", "encoder")
 
+#: Image-to-heatmap downsampling factors of the detector (4: 16x16 heatmaps for 64 px images).
+HEATMAP_STRIDES = (4, 2)
+
 
 def fine_channels(channels: int) -> int:
     """Width of the 1/2-resolution level for a detector of width ``channels``."""
@@ -121,12 +124,30 @@ class EncodedFrames:
         return tuple(EncodedFrames(*chunk) for chunk in zip(*parts, strict=True))
 
 
+class _HalfResolutionHeatmaps(nn.Module):
+    """Heatmaps at 1/2 resolution: the upsampled 1/4 features joined with the 1/2 level (U-Net
+    style, like :class:`KeypointReconstructor`'s decoder), a conv, then a 1x1 conv to ``K`` maps."""
+
+    def __init__(self, channels: int, num_keypoints: int) -> None:
+        super().__init__()
+        fine_ch = fine_channels(channels)
+        self.up = nn.Upsample(scale_factor=2, mode="nearest")
+        self.merge = _conv_block(channels + fine_ch, fine_ch)
+        self.out = nn.Conv2d(fine_ch, num_keypoints, 1)
+
+    def forward(self, coarse: Tensor, fine: Tensor) -> Tensor:
+        return self.out(self.merge(torch.cat([self.up(coarse), fine], dim=1)))
+
+
 class KeypointDetector(nn.Module):
     """Keypoint detector ``f_kp``: image -> ``K`` keypoints and a visual feature per keypoint.
 
     A strided conv encoder produces feature maps at 1/2 and 1/4 resolution; a 1x1 head turns the
     1/4 map into ``K`` heatmaps whose spatial soft-argmax gives the keypoints, and the
     heatmap-weighted average of the 1/4 features, projected to ``feat_dim``, gives ``phi_k``.
+    With ``heatmap_stride = 2`` the heatmaps are at 1/2 resolution instead (32x32 for 64 px
+    images), from the 1/4 features upsampled and joined with the 1/2 level; the feature pooling
+    then uses the heatmaps summed over each 2x2 cell.
     The same weights encode the initial frame ``I_0`` and the current frame ``I_t``.
 
     With ``feat_dim = 0`` there is no feature head and ``phi_k`` is empty (``[N, K, 0]``): a
@@ -145,6 +166,7 @@ class KeypointDetector(nn.Module):
         feat_dim: ``D``, size of each keypoint's visual feature (0: none).
         channels: ``C``, width of the 1/4-resolution features (the 1/2 level has ``C/2``).
         feature_grad: ``"head"`` or ``"encoder"``: how far feature gradients reach (see above).
+        heatmap_stride: 4 (heatmaps at 1/4 of the image size) or 2 (at 1/2).
     """
 
     def __init__(
@@ -153,6 +175,7 @@ class KeypointDetector(nn.Module):
         feat_dim: int = 16,
         channels: int = 32,
         feature_grad: str = "head",
+        heatmap_stride: int = 4,
     ) -> None:
         super().__init__()
         if num_keypoints < 1 or channels < 1:
@@ -163,7 +186,10 @@ class KeypointDetector(nn.Module):
             raise ValueError(f"feat_dim must be >= 0 (0: no features), got {feat_dim}.")
         if feature_grad not in FEATURE_GRADS:
             raise ValueError(f"feature_grad={feature_grad!r}; choose one of {FEATURE_GRADS}.")
+        if heatmap_stride not in HEATMAP_STRIDES:
+            raise ValueError(f"heatmap_stride={heatmap_stride!r}; choose one of {HEATMAP_STRIDES}.")
         self.feature_grad = feature_grad
+        self.heatmap_stride = heatmap_stride
         self.num_keypoints = num_keypoints
         self.feat_dim = feat_dim
         self.channels = channels
@@ -172,7 +198,10 @@ class KeypointDetector(nn.Module):
         self.coarse_net = nn.Sequential(
             _conv_block(fine_ch, channels, 2), _conv_block(channels, channels)
         )
-        self.heatmap_head = nn.Conv2d(channels, num_keypoints, 1)
+        if heatmap_stride == 4:
+            self.heatmap_head = nn.Conv2d(channels, num_keypoints, 1)
+        else:
+            self.heatmap_head = _HalfResolutionHeatmaps(channels, num_keypoints)
         self.feat_head = nn.Linear(channels, feat_dim) if feat_dim > 0 else None
 
     def encode(self, pixels: Tensor) -> EncodedFrames:
@@ -183,7 +212,11 @@ class KeypointDetector(nn.Module):
             raise ValueError(f"Image size {height}x{width} must be divisible by 4 (e.g. 64x64).")
         fine = self.fine_net(images)
         coarse = self.coarse_net(fine)
-        pos, heat = spatial_soft_argmax(self.heatmap_head(coarse))
+        if self.heatmap_stride == 4:
+            pos, heat = spatial_soft_argmax(self.heatmap_head(coarse))
+        else:
+            pos, heat = spatial_soft_argmax(self.heatmap_head(coarse, fine))
+            heat = F.avg_pool2d(heat, 2) * 4  # each 1/4-resolution cell's share, still sums to 1
         if self.feat_head is None:
             no_feat = pos.new_zeros(*pos.shape[:-1], 0)
             return EncodedFrames(pos=pos, feat=no_feat, fine=fine, coarse=coarse)

@@ -91,6 +91,8 @@ class KINetWorldModel(ConfigCheckpointMixin, KeypointWorldModel):
             features, an ablation); see :class:`KeypointDetector`.
         action_frame: ``"table"`` or ``"learned"``: the frame of the push in the node update (see
             :class:`KeypointInteractionNet`).
+        heatmap_stride: 4 (16x16 heatmaps for 64 px images) or 2 (32x32); see
+            :class:`KeypointDetector`.
     """
 
     checkpoint_format = CHECKPOINT_FORMAT
@@ -109,6 +111,7 @@ class KINetWorldModel(ConfigCheckpointMixin, KeypointWorldModel):
         deterministic: bool = False,
         feature_grad: str = "head",
         action_frame: str = "table",
+        heatmap_stride: int = 4,
     ) -> None:
         super().__init__()
         self.config: dict[str, Any] = {
@@ -123,8 +126,11 @@ class KINetWorldModel(ConfigCheckpointMixin, KeypointWorldModel):
             "deterministic": deterministic,
             "feature_grad": feature_grad,
             "action_frame": action_frame,
+            "heatmap_stride": heatmap_stride,
         }
-        self.detector = KeypointDetector(num_keypoints, feat_dim, channels, feature_grad)
+        self.detector = KeypointDetector(
+            num_keypoints, feat_dim, channels, feature_grad, heatmap_stride
+        )
         self.reconstructor = KeypointReconstructor(channels, blob_std)
         self.interaction = KeypointInteractionNet(
             feat_dim, embed_dim, hidden_dim, num_hidden, num_rounds, deterministic, action_frame
