@@ -14,6 +14,9 @@ OBJECT_YAW = "object_yaw"  # float32 [*B, N] radians (evaluation only)
 #: float32 [*B, N, 8] metres: each object's body-frame footprint as two boxes, each (centre x,
 #: centre y, half extent x, half extent y); constant within an episode (IN-full, evaluation)
 OBJECT_SHAPE = "object_shape"
+#: int64 [*B] objects in the episode's scene; stored by variable-count datasets, whose
+#: per-object arrays hold NaN for the objects beyond it (:mod:`kinet_rl.data.object_counts`)
+OBJECT_COUNT = "num_objects"
 UNSTABLE = "unstable"  # bool [*B, 1] the simulation went unstable; the episode ended
 STEP_REWARD = "reward"  # [*B, 1] written by a model env's step module (TorchRL nests it)
 REWARD = ("next", STEP_REWARD)  # [*B, 1]

@@ -235,6 +235,17 @@ class ExperimentSettings:
         """Folder of the experiment's main dataset."""
         return dataset_path(self.data)
 
+    @property
+    def dataset_expect(self) -> dict[str, Any]:
+        """What the main dataset must record (``load_dataset``'s ``expect``): the scene's
+        :data:`DATASET_ENV_KEYS` and ``data.num_objects_range``, whose ``high`` is then the
+        dataset's ``num_objects``."""
+        expect = {k: self.env[k] for k in DATASET_ENV_KEYS}
+        count_range = self.data.get("num_objects_range")
+        if count_range is None:
+            return {**expect, "num_objects_range": None}
+        return {**expect, "num_objects": count_range[1], "num_objects_range": list(count_range)}
+
     def identity(self) -> dict[str, Any]:
         """The settings a checkpoint must share with the run that resumes it."""
         return {
@@ -274,6 +285,7 @@ def check_data(data: Mapping[str, Any], env: Mapping[str, Any]) -> dict[str, Any
             args["max_discard_fraction"],
             args["backend"],
             args["distributed"],
+            args["num_objects_range"],
         )
     sets = conform(
         "data.generalization", data.get("generalization"), Mapping[str, Mapping[str, Any]] | None
@@ -313,6 +325,15 @@ def check_config(cfg: Mapping[str, Any]) -> ExperimentSettings:
     )
     with config_group("model"):
         model = model_class(**model_args)
+    count_range = settings.data.get("num_objects_range")
+    if count_range is not None and not trains_on_variable_object_counts(model):
+        raise ConfigError(
+            "data.num_objects_range",
+            f"{list(count_range)} collects episodes of different object counts, but "
+            f"{type(model).__name__} learns from every object's ground-truth position and "
+            "needs one count per dataset. Set data.num_objects_range=null (one count, "
+            "env.num_objects), or train a keypoint model on the range (model=kinet loss=kinet).",
+        )
     trains = parameter_annotation(loss_class, LOSS_MODEL_ARGUMENT)
     if isinstance(trains, type) and not isinstance(model, trains):
         raise ConfigError(
@@ -359,15 +380,17 @@ def dataset_jobs(env: Mapping[str, Any], data: Mapping[str, Any]) -> list[Datase
     """The main dataset of ``data``, then each of its generalization sets, in collection order.
 
     Generalization set ``i`` (1-based, in order) uses seed ``data.seed + i`` unless it sets its
-    own; its ``env`` entry overrides the env settings.
+    own; its ``env`` entry overrides the env settings. Generalization sets hold one object
+    count (``env.num_objects``) even when the main set has a ``num_objects_range``.
     """
     main = dict(data)
     generalization = main.pop("generalization", None) or {}
     jobs = [DatasetJob(main, dict(env))]
+    one_count = {"num_objects_range": None} if "num_objects_range" in main else {}
     for offset, (name, extra) in enumerate(generalization.items(), start=1):
         extra = dict(extra)
         env_overrides = extra.pop("env", None) or {}
-        arguments = {**main, "seed": main["seed"] + offset, **extra, "name": name}
+        arguments = {**main, **one_count, "seed": main["seed"] + offset, **extra, "name": name}
         jobs.append(DatasetJob(arguments, {**env, **env_overrides}))
     return jobs
 
@@ -427,13 +450,22 @@ def model_file(model: nn.Module) -> str:
     return trained_model_file(type(model))
 
 
-def check_dataset_for(model: nn.Module, dataset: PushDataset) -> None:
-    """Raises ``DatasetMismatchError`` if ``dataset`` stores no array that ``model`` reads.
+def trains_on_variable_object_counts(model: nn.Module) -> bool:
+    """Whether ``model`` declares ``variable_object_count`` (keypoint models do): it trains on
+    datasets whose episodes hold different object counts, with NaN for the missing objects."""
+    return bool(getattr(model, "variable_object_count", False))
 
-    A model lists them in ``state_keys`` (IN-full: ``object_yaw``, ``object_shape``; datasets
-    collected by an older kinet_rl lack ``object_shape``).
+
+def check_dataset_for(model: nn.Module, dataset: PushDataset) -> None:
+    """Raises ``DatasetMismatchError`` if ``dataset`` stores no array that ``model`` reads, or
+    episodes of different object counts that ``model`` cannot train on.
+
+    A model lists the arrays in ``state_keys`` (IN-full: ``object_yaw``, ``object_shape``;
+    datasets collected by an older kinet_rl lack ``object_shape``).
     """
     dataset.check_keys(getattr(model, "state_keys", ()), type(model).__name__)
+    if not trains_on_variable_object_counts(model):
+        dataset.check_fixed_object_count(type(model).__name__)
 
 
 def run_experiment(
@@ -476,9 +508,8 @@ def _train_and_evaluate(
         collect_datasets(settings.env, settings.data)
     if ctx.world_size > 1:
         torch.distributed.barrier()
-    expect = {k: settings.env[k] for k in DATASET_ENV_KEYS}
     data = {
-        split: load_dataset(settings.dataset_path, split, expect)
+        split: load_dataset(settings.dataset_path, split, settings.dataset_expect)
         for split in ("train", "val", "test")
     }
     model = build_model()

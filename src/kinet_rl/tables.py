@@ -62,7 +62,6 @@ from kinet_rl.interrupts import exit_on_interrupt
 from kinet_rl.models import KINetWorldModel
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.pipeline import (
-    DATASET_ENV_KEYS,
     ExperimentSettings,
     check_config,
     check_dataset_for,
@@ -296,8 +295,7 @@ def run_row(
 
     def forward() -> dict[int, dict[str, float]]:
         settings = ExperimentSettings.from_container(to_dict(cfg))
-        expect = {k: settings.env[k] for k in DATASET_ENV_KEYS}
-        test = load_dataset(settings.dataset_path, "test", expect)
+        test = load_dataset(settings.dataset_path, "test", settings.dataset_expect)
         check_dataset_for(net, test)
         scene = settings.scene
         geometry = SceneGeometry.of_scene(scene.task, scene.camera, scene.image_size)

@@ -17,6 +17,7 @@ from tensordict import TensorDict
 
 from kinet_rl.atomic import DirectoryInUseError, directory_lock
 from kinet_rl.data import load_dataset
+from kinet_rl.data.object_counts import chunk_object_count
 
 pytestmark = pytest.mark.slow
 
@@ -173,3 +174,21 @@ def test_ctrl_c_stops_two_workers_promptly_and_the_printed_command_resumes(
     assert resume == ["python", *command[1:]]
     run_collect(interrupted, command=[sys.executable, *resume[1:]])
     assert (stored(interrupted / "smoke") == stored(main_only_root / "smoke")).all()
+
+
+def test_a_count_range_collects_each_chunk_with_its_object_count(tmp_path: Path) -> None:
+    run_collect(tmp_path / "range", "data.generalization=null", "data.num_objects_range=[1,3]")
+    episodes = stored(tmp_path / "range" / "smoke")
+    counts, source = episodes["num_objects"], episodes["source_episode"]
+    assert set(counts.tolist()) == {1, 2, 3}  # seed 0's chunks of 2 draw 2, 3, 1, 2, 1, ...
+    assert counts.tolist() == [chunk_object_count(0, s // 2, (1, 3)) for s in source.tolist()]
+    present = ~episodes["object_pos"].isnan().any(-1)  # [E, T+1, 3]
+    assert torch.equal(present.sum(-1), counts[:, None].expand(-1, present.shape[1]))
+    run_collect(tmp_path / "fixed", "data.generalization=null")  # 3 objects, the same seed
+    fixed = stored(tmp_path / "fixed" / "smoke")
+    for i in (counts == 3).nonzero().flatten().tolist():
+        j = (fixed["source_episode"] == source[i]).nonzero().item()
+        assert torch.equal(episodes["pixels"][i], fixed["pixels"][j])
+    expect = {"num_objects": 3, "num_objects_range": [1, 3]}
+    data = load_dataset(tmp_path / "range" / "smoke", expect=expect)
+    assert data.sample(4, horizon=2)["pixels"].shape == (4, 32, 32, 3)

@@ -99,6 +99,19 @@ REFUSED = {
     "data splits": (["data.num_episodes=5"], "data.splits", "empty: ['val']"),
     "policy range": (["data.policy.keep_inside=2"], "data.policy.keep_inside", "in (0, 1]"),
     "policy unknown": (["+data.policy.noise=1"], "data.policy.noise", "unknown key"),
+    "object counts low": (
+        ["data.num_objects_range=[0,3]"],
+        "data.num_objects_range",
+        "got [0, 3], expected null (one count, env.num_objects) or [low, high] with 1 <= low",
+    ),
+    "object counts high": (["data.num_objects_range=[2,6]"], "data.num_objects_range", "<= 5"),
+    "object counts order": (["data.num_objects_range=[4,2]"], "data.num_objects_range", "[4, 2]"),
+    "object counts type": (["data.num_objects_range=3"], "data.num_objects_range", "got 3"),
+    "object counts model": (
+        ["model=in", "loss=in", "data.num_objects_range=[1,5]"],
+        "data.num_objects_range",
+        "ObjectInteractionModel learns from every object's ground-truth position",
+    ),
     "generalization": (
         ["+data.generalization.many.num_episodes=2", "+data.generalization.many.env.num_objects=9"],
         "data.generalization.many.env.num_objects",

@@ -1,5 +1,5 @@
 """Collection into on-disk datasets with the fake push env: splits, resumption, unstable runs,
-interruptions, a full disk and a second collector in the same folder."""
+interruptions, a full disk, a second collector in the same folder, variable object counts."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ from tensordict import TensorDict
 import kinet_rl.data.collection
 from fake_push_env import make_fake_env
 from kinet_rl.atomic import DirectoryInUseError, DiskFullError, directory_lock
+from kinet_rl.config_schema import ConfigError
 from kinet_rl.data import (
     DatasetIncompleteError,
     DatasetMismatchError,
@@ -24,14 +25,21 @@ from kinet_rl.data import (
     load_dataset,
     split_ranges,
 )
+from kinet_rl.data.object_counts import chunk_object_count
 from kinet_rl.data.storage import EPISODES_DIR, PROGRESS_FILE, EpisodeWriter
 
 ENV_CONFIG = {"task": "fake", "camera": "top", "image_size": 8}
 
 
-def collect(root: Path, name: str, unstable_prob: float = 0.1, **kwargs) -> Path:
+def collect(
+    root: Path, name: str, unstable_prob: float = 0.1, num_objects: int = 3, **kwargs
+) -> Path:
     env_fn = functools.partial(
-        make_fake_env, image_size=8, max_steps=4, unstable_prob=unstable_prob
+        make_fake_env,
+        num_objects=num_objects,
+        image_size=8,
+        max_steps=4,
+        unstable_prob=unstable_prob,
     )
     settings = {"num_episodes": 10, "num_workers": 1, "chunk_episodes": 3, "seed": 7}
     settings.update(kwargs)
@@ -149,15 +157,20 @@ def progress_of(path: Path) -> dict[str, Any]:
     return json.loads((path / PROGRESS_FILE).read_text())
 
 
-def test_an_interrupt_keeps_every_finished_episode_and_resumes(
-    reference: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def interrupt_each_collector(monkeypatch: pytest.MonkeyPatch, batches: int) -> None:
+    """Makes every collector of the collection an :class:`InterruptedCollector` at ``batches``."""
     make_collector = kinet_rl.data.collection.make_collector
     monkeypatch.setattr(
         kinet_rl.data.collection,
         "make_collector",
-        lambda *args, **kwargs: InterruptedCollector(make_collector(*args, **kwargs), 5),
+        lambda *args, **kwargs: InterruptedCollector(make_collector(*args, **kwargs), batches),
     )
+
+
+def test_an_interrupt_keeps_every_finished_episode_and_resumes(
+    reference: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    interrupt_each_collector(monkeypatch, 5)
     with pytest.raises(KeyboardInterrupt):
         collect(tmp_path, "interrupted")  # chunks of 3, one episode per batch
     progress = progress_of(tmp_path / "interrupted")
@@ -200,3 +213,99 @@ def test_a_second_collection_into_the_same_folder_is_refused(tmp_path: Path) -> 
         with pytest.raises(DirectoryInUseError, match="busy is in use.*is collecting a dataset"):
             collect(tmp_path, "busy")
         assert not (tmp_path / "busy" / PROGRESS_FILE).exists()
+
+
+COUNT_RANGE = (1, 3)
+
+
+def assert_same_episodes(a: Path, b: Path) -> None:
+    """The two datasets store equal arrays (NaN padding equal to NaN padding)."""
+    first, second = stored(a), stored(b)
+    assert set(first.keys()) == set(second.keys())
+    for key in first.keys():  # noqa: SIM118 (iterating a TensorDict yields its rows)
+        assert torch.equal(first[key].nan_to_num(), second[key].nan_to_num()), key
+
+
+@pytest.fixture(scope="module")
+def variable_reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """10 episodes of 1 to 3 objects, a count per chunk of 3 source episodes."""
+    return collect(tmp_path_factory.mktemp("data"), "variable", num_objects_range=COUNT_RANGE)
+
+
+def test_object_counts_are_drawn_per_chunk_within_the_range_and_cover_it(
+    variable_reference: Path,
+) -> None:
+    draws = [chunk_object_count(7, chunk, (2, 4)) for chunk in range(60)]
+    assert set(draws) == {2, 3, 4}
+    assert draws != [chunk_object_count(8, chunk, (2, 4)) for chunk in range(60)]
+    episodes = stored(variable_reference)
+    counts, source = episodes["num_objects"].tolist(), episodes["source_episode"].tolist()
+    assert set(counts) == {1, 2, 3}  # this seed's 10 episodes cover the range
+    assert counts == [chunk_object_count(7, s // 3, COUNT_RANGE) for s in source]
+    metadata = load_dataset(variable_reference).metadata
+    assert metadata["num_objects_range"] == list(COUNT_RANGE) and metadata["num_objects"] == 3
+    assert metadata["arrays"][-1] == "num_objects"
+
+
+def test_objects_beyond_the_episode_count_are_nan(variable_reference: Path) -> None:
+    episodes = stored(variable_reference)
+    counts = episodes["num_objects"]
+    present = torch.arange(3) < counts[:, None]  # [E, N]
+    pos_present = ~episodes["object_pos"].isnan().any(-1)  # [E, T+1, N]
+    assert torch.equal(pos_present, present[:, None].expand_as(pos_present))
+    yaw_present = ~episodes["object_yaw"].isnan()
+    assert torch.equal(yaw_present, present[:, None].expand_as(yaw_present))
+    assert torch.equal(~episodes["object_shape"].isnan().any(-1), present)
+
+
+def test_each_episode_is_the_fixed_count_episode_of_its_index(tmp_path: Path) -> None:
+    variable = stored(collect(tmp_path, "variable", 0.0, num_episodes=9, num_objects_range=(1, 3)))
+    for count in variable["num_objects"].unique().tolist():
+        fixed = stored(collect(tmp_path, f"fixed{count}", 0.0, num_episodes=9, num_objects=count))
+        same = variable["num_objects"] == count
+        assert torch.equal(variable["pixels"][same], fixed["pixels"][same])
+        assert torch.equal(variable["action"][same], fixed["action"][same])
+        assert torch.equal(variable["object_pos"][same][:, :, :count], fixed["object_pos"][same])
+
+
+def test_same_seed_same_variable_dataset_other_seed_other_counts(
+    variable_reference: Path, tmp_path: Path
+) -> None:
+    again = collect(tmp_path, "again", num_objects_range=COUNT_RANGE)
+    assert_same_episodes(again, variable_reference)
+    other = collect(tmp_path, "other", seed=8, num_objects_range=COUNT_RANGE)
+    assert not torch.equal(stored(other)["num_objects"], stored(variable_reference)["num_objects"])
+
+
+def test_a_variable_collection_interrupted_mid_chunk_resumes_to_the_same_dataset(
+    variable_reference: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    interrupt_each_collector(monkeypatch, 2)  # one collector per chunk of 3
+    with pytest.raises(KeyboardInterrupt):
+        collect(tmp_path, "interrupted", num_objects_range=COUNT_RANGE)
+    assert progress_of(tmp_path / "interrupted")["processed"] == 2  # inside the first chunk
+    monkeypatch.undo()
+    with pytest.raises(DatasetMismatchError, match="other settings"):  # the chunks decide counts
+        collect(tmp_path, "interrupted", num_objects_range=COUNT_RANGE, chunk_episodes=4)
+    collect(tmp_path, "interrupted", num_objects_range=COUNT_RANGE)
+    assert_same_episodes(tmp_path / "interrupted", variable_reference)
+    assert (
+        load_dataset(tmp_path / "interrupted").metadata["discarded_unstable"]
+        == (load_dataset(variable_reference).metadata["discarded_unstable"])
+    )
+
+
+def test_a_fixed_count_collection_stores_and_records_no_counts(reference: Path) -> None:
+    assert "num_objects" not in stored(reference).keys()  # noqa: SIM118
+    assert "num_objects_range" not in load_dataset(reference).metadata
+    assert set(progress_of(reference)["settings"]) == {
+        "env", "seed", "num_episodes", "episode_length", "image_size", "num_objects",
+        "workspace_half_size", "policy", "splits",
+    }  # fmt: skip
+
+
+@pytest.mark.parametrize("bad", [(0, 2), (2, 6), (3, 2)])
+def test_a_bad_object_count_range_is_refused_before_collecting(bad, tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"num_objects_range: got \[.*1 <= low <= high <= 5"):
+        collect(tmp_path, "bad", num_objects_range=bad)
+    assert not (tmp_path / "bad").exists()

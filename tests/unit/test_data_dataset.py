@@ -1,9 +1,11 @@
-"""Loading datasets: batch contract, no duplicated frames, refusal of bad datasets."""
+"""Loading datasets: batch contract, no duplicated frames, refusal of bad datasets, datasets of
+variable object counts."""
 
 from __future__ import annotations
 
 import functools
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -22,7 +24,9 @@ from kinet_rl.data import (
     load_dataset,
 )
 from kinet_rl.data.storage import EPISODES_DIR, METADATA_FILE
-from kinet_rl.evaluation.forward import start_frames
+from kinet_rl.envs.geometry import SceneGeometry
+from kinet_rl.evaluation.forward import forward_errors, keypoint_accuracy, start_frames
+from kinet_rl.models import KINetLoss
 from kinet_rl.pipeline import check_dataset_for
 
 H, T, N = 8, 4, 3
@@ -235,3 +239,53 @@ def test_a_stored_shape_file_of_the_wrong_size_is_refused(tmp_path: Path) -> Non
     (path / EPISODES_DIR / "object_shape.memmap").write_bytes(b"\0" * 12)
     with pytest.raises(DatasetCorruptError, match="object_shape.memmap has 12 bytes"):
         load_dataset(path)
+
+
+@pytest.fixture(scope="module")
+def variable_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """12 episodes of 1 to 3 objects (a count per chunk of 2), 16 px for a keypoint model."""
+    root = tmp_path_factory.mktemp("data")
+    return collect(
+        root, "variable", image_size=16, num_episodes=12, chunk_episodes=2, num_objects_range=(1, 3)
+    )
+
+
+def test_a_variable_count_dataset_yields_kinet_training_batches(
+    variable_path: Path, tiny_kinet
+) -> None:
+    data = load_dataset(variable_path, "train")
+    assert data.num_objects == N and set(data.object_counts.tolist()) == {1, 2, 3}
+    batch = data.sample(8, torch.Generator().manual_seed(0), horizon=2)
+    assert batch["pixels"].shape == (8, 16, 16, 3) and batch["object_pos"].shape == (8, N, 2)
+    assert batch["object_pos"].isnan().any()  # some sampled episodes hold fewer than N objects
+    check_dataset_for(tiny_kinet(), data)
+    losses = KINetLoss(tiny_kinet(), rollout_weight=1.0)(batch)
+    assert all(torch.isfinite(losses[key]) for key in losses.keys())  # noqa: SIM118
+
+
+def test_forward_errors_leave_the_missing_objects_out(variable_path: Path, tiny_kinet) -> None:
+    data, model = load_dataset(variable_path, "all"), tiny_kinet()
+    geometry = SceneGeometry.of_scene("blocks", "top", 16)
+    errors = forward_errors(model.object_rollout(geometry), data, (1, 2), 16)
+    assert all(math.isfinite(errors[h][key]) for h in (1, 2) for key in ("model", "no_motion"))
+    assert 0 <= keypoint_accuracy(model, data, geometry, num_frames=16) <= 1
+
+
+def test_models_that_need_one_object_count_refuse_a_variable_count_dataset(
+    variable_path: Path, tiny_baseline
+) -> None:
+    data = load_dataset(variable_path)
+    for name in ("in", "in_full", "visin", "forw"):
+        model = tiny_baseline(name, num_objects=N, image_size=16)
+        with pytest.raises(
+            DatasetMismatchError,
+            match=rf"{type(model).__name__} needs the same object count in every episode, but "
+            rf"dataset .*variable holds 1 to 3 objects.*num_objects_range=null",
+        ):
+            check_dataset_for(model, data)
+
+
+def test_a_variable_count_dataset_is_not_taken_for_a_fixed_count_one(variable_path: Path) -> None:
+    with pytest.raises(DatasetMismatchError, match=r"data.num_objects_range=null"):
+        load_dataset(variable_path, expect={"num_objects": N, "num_objects_range": None})
+    load_dataset(variable_path, expect={"num_objects": N, "num_objects_range": [1, 3]})

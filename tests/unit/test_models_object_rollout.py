@@ -43,3 +43,12 @@ def test_prediction_moves_objects_with_their_keypoints():
     pred = predict_object_positions(obj, kp0, kp1, keypoint_membership(kp0, obj))
     torch.testing.assert_close(pred, torch.tensor([[[0.2, 0.0], [1.0, 1.0]]]))
     assert abs(position_error(pred, obj).item() - 0.1) < 1e-6
+
+
+def test_absent_objects_take_no_keypoints():
+    nan = float("nan")
+    obj = torch.tensor([[[0.0, 0.0], [nan, nan], [1.0, 0.0]]])  # object 1: variable-count padding
+    kp = torch.tensor([[[0.1, 0.0], [0.9, 0.0], [1.2, 0.0]]])
+    w = keypoint_membership(kp, obj)
+    torch.testing.assert_close(w[:, [0, 2]], keypoint_membership(kp, obj[:, [0, 2]]))
+    assert predict_object_positions(obj, kp, kp + 1.0, w)[0, 1].isnan().all()

@@ -14,15 +14,19 @@ from kinet_rl.configs import config_dir
 from kinet_rl.envs import SceneSettings
 from kinet_rl.models import KINetWorldModel
 from kinet_rl.models.checkpointing import checkpoint_scene
-from kinet_rl.pipeline import ExperimentSettings, run_experiment
+from kinet_rl.pipeline import ExperimentSettings, check_config, dataset_jobs, run_experiment
 
 EXPERIMENTS = sorted(p.stem for p in (Path(config_dir()) / "exp").glob("*.yaml"))
 
 
-def settings_of(*overrides: str) -> ExperimentSettings:
+def container_of(*overrides: str) -> dict:
     with initialize_config_dir(config_dir(), version_base="1.3"):
         cfg = compose(config_name="config", overrides=list(overrides))
-    return ExperimentSettings.from_container(OmegaConf.to_container(cfg, resolve=True))
+    return OmegaConf.to_container(cfg, resolve=True)
+
+
+def settings_of(*overrides: str) -> ExperimentSettings:
+    return ExperimentSettings.from_container(container_of(*overrides))
 
 
 @pytest.mark.parametrize("exp", [None, *EXPERIMENTS])
@@ -85,3 +89,23 @@ def test_a_second_training_run_in_the_same_directory_is_refused_before_any_work(
     with directory_lock(tmp_path / "run", "training"), busy:
         run_experiment(settings, never, never, tmp_path / "run")
     assert not (tmp_path / "data").exists()  # refused before collecting
+
+
+@pytest.mark.parametrize("model", ["kinet", "vcdn"])
+def test_a_count_range_is_for_the_main_dataset_of_a_keypoint_model(model):
+    config = container_of(
+        "+exp=blocks_topview", f"model={model}", f"loss={model}", "data.num_objects_range=[1,5]"
+    )
+    settings = check_config(config)
+    assert settings.dataset_expect == {
+        "task": "blocks", "camera": "top", "image_size": 64, "num_objects": 5,
+        "num_objects_range": [1, 5],
+    }  # fmt: skip
+    main, *generalization = dataset_jobs(settings.env, settings.data)
+    assert main.arguments["num_objects_range"] == [1, 5]
+    assert {job.arguments["num_objects_range"] for job in generalization} == {None}
+    fixed = settings_of("+exp=blocks_topview")
+    assert (
+        fixed.dataset_expect["num_objects"] == 3
+        and fixed.dataset_expect["num_objects_range"] is None
+    )

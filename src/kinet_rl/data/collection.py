@@ -6,9 +6,10 @@ import functools
 import importlib.metadata
 import inspect
 import logging
+import math
 import platform
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +23,7 @@ from tqdm import tqdm
 
 from kinet_rl.atomic import directory_lock
 from kinet_rl.config_schema import check_arguments, check_keys, config_group, invalid, require
+from kinet_rl.data.object_counts import check_object_count_range, chunk_envs
 from kinet_rl.data.policy import (
     EPISODE_ID,
     STEP_COUNT,
@@ -124,11 +126,15 @@ def assemble_episode(rows: TensorDictBase, episode_length: int) -> TensorDictBas
 
 
 class EpisodeAssembler:
-    """Groups streamed transitions by episode and releases finished episodes in index order."""
+    """Groups streamed transitions by episode and releases finished episodes in index order.
 
-    def __init__(self, first_episode: int, episode_length: int) -> None:
+    Episodes from ``stop`` on are ignored (another collector collects them).
+    """
+
+    def __init__(self, first_episode: int, episode_length: int, stop: float = math.inf) -> None:
         self.next_episode = first_episode
         self.episode_length = episode_length
+        self.stop = stop
         self._pending: dict[int, list[TensorDictBase]] = {}
         self._finished: dict[int, TensorDictBase | None] = {}
 
@@ -141,6 +147,8 @@ class EpisodeAssembler:
             mask = ids == episode
             if episode < self.next_episode or episode in self._finished:
                 continue  # already accounted for (resumed run, or a replayed reset)
+            if episode >= self.stop:
+                continue
             self._pending.setdefault(episode, []).append(batch[mask])
             if done[mask].any():
                 rows = torch.cat(self._pending.pop(episode))
@@ -171,6 +179,7 @@ def check_collection(
     max_discard_fraction: float,
     backend: str,
     distributed: Mapping[str, Any] | None,
+    num_objects_range: Sequence[int] | None = None,
 ) -> None:
     """Raises (``ConfigError`` naming the argument) for :func:`collect_dataset` arguments it
     would refuse; builds nothing, so a config can be checked before any collection."""
@@ -191,6 +200,7 @@ def check_collection(
         args = check_arguments(RandomPushPolicy, policy, exclude=["workspace_half_size"])
         RandomPushPolicy(1.0, **args)  # its own range checks
     check_backend(backend, distributed)
+    check_object_count_range(num_objects_range)
 
 
 def make_collector(
@@ -244,7 +254,7 @@ def make_collector(
 
 
 def collect_dataset(
-    env_fn: Callable[[], EnvBase],
+    env_fn: Callable[..., EnvBase],
     env_config: Mapping[str, Any],
     root: str | Path = "data",
     name: str = "blocks_top64",
@@ -259,6 +269,7 @@ def collect_dataset(
     progress: bool = True,
     backend: str = "local",
     distributed: Mapping[str, Any] | None = None,
+    num_objects_range: tuple[int, int] | None = None,
 ) -> Path:
     """Collects ``num_episodes`` random-push episodes into ``<root>/<name>``; resumes if partial.
 
@@ -269,7 +280,8 @@ def collect_dataset(
     counted, and replaced by later ones. The folder is locked while collecting.
 
     Args:
-        env_fn: picklable zero-argument env factory (e.g. ``functools.partial(make_env, ...)``).
+        env_fn: picklable zero-argument env factory (e.g. ``functools.partial(make_env, ...)``);
+            with ``num_objects_range`` it must also take ``num_objects=``.
         env_config: the env's settings, recorded in the metadata and checked by ``load_dataset``.
         root: folder holding datasets (relative paths are relative to the working directory).
         name: dataset folder name.
@@ -286,6 +298,11 @@ def collect_dataset(
             ``DistributedCollector``; see :func:`make_collector`). Both give the same data.
         distributed: extra ``DistributedCollector`` arguments for ``backend="distributed"``,
             e.g. ``{"launcher": "submitit", "tcp_port": 10003, "slurm_kwargs": {...}}``.
+        num_objects_range: ``(low, high)``: each chunk of ``chunk_episodes`` source episodes
+            gets an object count in [low, high] drawn from ``(seed, chunk)`` and is collected
+            by a fresh collector on ``env_fn(num_objects=count)``; stored with NaN padding to
+            ``high`` objects and a per-episode count (:mod:`kinet_rl.data.object_counts`).
+            None: every episode has the env's count.
 
     Returns:
         The dataset folder.
@@ -308,12 +325,13 @@ def collect_dataset(
         max_discard_fraction,
         backend,
         distributed,
+        num_objects_range,
     )
     with directory_lock(path, "collecting a dataset"):
         if (path / METADATA_FILE).exists():  # completed by the process that held the lock
             return path
         ranges = split_ranges(num_episodes, splits)
-        probe = env_fn()
+        probe = env_fn() if num_objects_range is None else env_fn(num_objects=num_objects_range[1])
         try:
             episode_length = episode_length_of(probe)
             image_size = int(probe.observation_spec[PIXELS].shape[-2])
@@ -334,29 +352,50 @@ def collect_dataset(
             "policy": dict(policy or {}),
             "splits": splits,
         }
+        if num_objects_range is not None:  # both decide which episode gets which count
+            settings["num_objects_range"] = list(num_objects_range)
+            settings["chunk_episodes"] = chunk_episodes
         writer = EpisodeWriter(
-            path, num_episodes, episode_length, image_size, num_objects, settings
+            path,
+            num_episodes,
+            episode_length,
+            image_size,
+            num_objects,
+            settings,
+            variable_object_count=num_objects_range is not None,
         )
         bar = tqdm(total=num_episodes, initial=writer.committed, desc=name, disable=not progress)
         start = time.perf_counter()
-        start_collector = functools.partial(
-            make_collector,
-            env_fn,
-            push_policy,
-            seed,
-            writer.processed,
-            num_workers,
-            episode_length,
-            backend=backend,
-            distributed=distributed,
-        )
+        parts: Iterable[tuple[Callable[[], EnvBase], float]] = [(env_fn, math.inf)]
+        if num_objects_range is not None:  # one collector per chunk, on an env of its count
+            parts = chunk_envs(env_fn, seed, chunk_episodes, num_objects_range, writer.processed)
         try:
-            with worker_processes(
-                start_collector, lambda collector: collector.shutdown(timeout=SHUTDOWN_SECONDS)
-            ) as collector:
-                discarded = fill_writer(
-                    writer, collector, episode_length, chunk_episodes, max_discard_fraction, bar
+            for part_env_fn, stop in parts:
+                if writer.committed == num_episodes:
+                    break
+                start_collector = functools.partial(
+                    make_collector,
+                    part_env_fn,
+                    push_policy,
+                    seed,
+                    writer.processed,
+                    num_workers,
+                    episode_length,
+                    backend=backend,
+                    distributed=distributed,
                 )
+                with worker_processes(
+                    start_collector, lambda collector: collector.shutdown(timeout=SHUTDOWN_SECONDS)
+                ) as collector:
+                    fill_writer(
+                        writer,
+                        collector,
+                        episode_length,
+                        chunk_episodes,
+                        max_discard_fraction,
+                        bar,
+                        stop,
+                    )
         finally:
             bar.close()
         writer.finalize(
@@ -369,7 +408,7 @@ def collect_dataset(
                 "split_fractions": splits,
                 "num_workers": num_workers,
                 "backend": backend,
-                "discarded_unstable": discarded,
+                "discarded_unstable": writer.discarded,
                 "processed_episodes": writer.processed,
                 "arrays": list(writer.specs),
                 "versions": package_versions(),
@@ -387,18 +426,21 @@ def fill_writer(
     chunk_episodes: int,
     max_discard_fraction: float,
     bar: tqdm,
-) -> int:
-    """Commits the collector's stable episodes to ``writer`` until it is full; returns the discards.
+    stop: float = math.inf,
+) -> None:
+    """Commits the collector's stable episodes to ``writer`` until it is full or the source
+    episodes before ``stop`` are all processed.
 
-    Episodes are committed in chunks of ``chunk_episodes``. A Ctrl-C or SIGTERM that arrives
-    while waiting for the collector (nearly all of the time) first commits the finished
-    episodes of the open chunk, so that no completed episode is lost.
+    Episodes are committed in chunks of ``chunk_episodes``, and the open chunk when ``stop`` is
+    reached. A Ctrl-C or SIGTERM that arrives while waiting for the collector (nearly all of the
+    time) first commits the finished episodes of the open chunk, so that no completed episode
+    is lost.
     """
-    assembler = EpisodeAssembler(writer.processed, episode_length)
+    assembler = EpisodeAssembler(writer.processed, episode_length, stop)
     discarded = writer.discarded
     buffer: list[TensorDictBase] = []
     batches = iter(collector)
-    while writer.committed < writer.num_episodes:
+    while writer.committed < writer.num_episodes and assembler.next_episode < stop:
         try:
             batch = next(batches)
         except KeyboardInterrupt:
@@ -410,11 +452,11 @@ def fill_writer(
         for index, episode in assembler.pop_ready():
             if episode is None:
                 discarded += 1
-                continue
-            buffer.append(episode)
+            else:
+                buffer.append(episode)
             full = writer.committed + len(buffer) == writer.num_episodes
-            if len(buffer) == chunk_episodes or full:
-                writer.commit(torch.stack(buffer), index + 1, discarded)
+            if len(buffer) == chunk_episodes or full or index + 1 == stop:
+                writer.commit(torch.stack(buffer) if buffer else None, index + 1, discarded)
                 bar.update(len(buffer))
                 buffer = []
             if full:
@@ -426,4 +468,3 @@ def fill_writer(
                 f"{discarded} of {assembler.next_episode} episodes went unstable; check the "
                 "env's physics settings (kept data so far is in place and will resume)."
             )
-    return discarded

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
@@ -29,6 +30,7 @@ from kinet_rl.keys import (
     EPISODE,
     FUTURE_ACTION,
     FUTURE_PIXELS,
+    OBJECT_COUNT,
     OBJECT_POS,
     OBJECT_SHAPE,
     OBJECT_YAW,
@@ -41,11 +43,21 @@ logger = logging.getLogger(__name__)
 
 ALL_SPLITS = "all"
 REQUIRED_METADATA = ("env", "splits", "num_episodes", "episode_length", "image_size", "num_objects")
+#: Recorded collection settings of the ``data`` group that ``expect`` can name (null if absent).
+DATA_SETTINGS = ("num_objects_range",)
+
+
+def _override(key: str, value: Any) -> str:
+    """The command-line override that collects a dataset with ``key`` set to ``value``."""
+    if key in DATA_SETTINGS:
+        return f"data.{key}={json.dumps(value, separators=(',', ':'))}"
+    return f"env.{key}={value}"
 
 
 def _check_expectations(path: Path, metadata: Mapping[str, Any], expect: Mapping[str, Any]) -> None:
     env = metadata["env"]
     recorded = {**env, **{k: metadata[k] for k in ("image_size", "num_objects") if k in metadata}}
+    recorded |= {k: metadata.get(k) for k in DATA_SETTINGS}
     unknown = sorted(set(expect) - set(recorded))
     if unknown:
         raise ValueError(
@@ -55,7 +67,7 @@ def _check_expectations(path: Path, metadata: Mapping[str, Any], expect: Mapping
     if wrong:
         have = ", ".join(f"{k}={recorded[k]!r}" for k in wrong)
         want = ", ".join(f"{k}={v!r}" for k, v in wrong.items())
-        overrides = " ".join(f"env.{k}={v}" for k, v in wrong.items())
+        overrides = " ".join(_override(k, v) for k, v in wrong.items())
         raise DatasetMismatchError(
             f"Dataset {path} has {have} but the caller expects {want}. Collect a matching "
             f"dataset (e.g. `python -m kinet_rl.collect {overrides} data.name=<new name>`) "
@@ -75,8 +87,12 @@ class PushDataset:
         path: dataset folder ``<root>/<name>`` written by :func:`collect_dataset`.
         split: ``"train"``, ``"val"``, ``"test"`` (or another recorded split), or ``"all"``.
         expect: recorded settings the caller relies on, e.g. ``{"image_size": 64,
-            "camera": "top", "task": "blocks"}``; any difference raises
-            :class:`DatasetMismatchError`.
+            "camera": "top", "task": "blocks", "num_objects_range": None}``; any difference
+            raises :class:`DatasetMismatchError`.
+
+    A variable-count dataset (collected with ``num_objects_range``) stores ``num_objects`` =
+    N, the most objects an episode holds; its batches' per-object entries (``object_pos``,
+    ``object_yaw``, ``object_shape``) are NaN for the objects beyond an episode's count.
     """
 
     path: Path | None  # None for in-memory episodes (:meth:`from_episodes`)
@@ -156,6 +172,9 @@ class PushDataset:
         self._object_yaw = _rows(stored[OBJECT_YAW])  # [E * (T+1), N]
         shapes = stored.get(OBJECT_SHAPE, None)  # absent from datasets of older versions
         self._object_shape = None if shapes is None else shapes.as_subclass(torch.Tensor)
+        counts = stored.get(OBJECT_COUNT, None)  # stored by variable-count datasets only
+        #: Objects of each stored episode ``[E]``, or None when every episode holds N.
+        self.object_counts = None if counts is None else counts.as_subclass(torch.Tensor)
         self.stored_keys = frozenset(stored.keys())
         self.episode_start, self.episode_stop = start, stop
         self.num_episodes = stop - start
@@ -178,6 +197,25 @@ class PushDataset:
         raise DatasetMismatchError(
             f"{user} needs {missing}, which dataset {self.path} does not store (it was collected "
             f"by an older kinet_rl). Delete {self.path} and collect it again: {COLLECT_HINT}"
+        )
+
+    def check_fixed_object_count(self, user: str) -> None:
+        """Raises :class:`DatasetMismatchError` if the episodes hold different object counts.
+
+        Args:
+            user: who needs one object count in every episode, for the message (e.g. the
+                model's class name).
+        """
+        if self.object_counts is None:
+            return
+        low, high = int(self.object_counts.min()), int(self.object_counts.max())
+        source = "these in-memory episodes" if self.path is None else f"dataset {self.path}"
+        raise DatasetMismatchError(
+            f"{user} needs the same object count in every episode, but {source} holds {low} to "
+            f"{high} objects per episode (collected with data.num_objects_range; the missing "
+            f"objects are NaN). Train a keypoint model (KINet, V-CDN) on it, or collect a "
+            f"fixed-count dataset for {user}: {COLLECT_HINT} data.num_objects_range=null "
+            "env.num_objects=<N>."
         )
 
     def _shapes(self, episode: torch.Tensor) -> dict[str, torch.Tensor]:

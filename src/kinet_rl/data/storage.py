@@ -9,13 +9,17 @@ Layout of ``<root>/<name>/``::
       object_yaw.memmap      float32 [E, T+1, N]
       object_shape.memmap    float32 [E, N, 8]  body-frame footprints, one per episode (optional)
       source_episode.memmap  int64 [E]  episode index within the collection run
+      num_objects.memmap     int64 [E]  objects per episode (variable-count datasets only;
+                             their object arrays hold NaN beyond it, N = the range's high)
       meta.json              tensordict's own shapes and dtypes
     progress.json      committed episodes, processed (kept + discarded) source episodes, settings
     metadata.json      written last, atomically: its presence marks the dataset complete;
                        ``arrays`` lists the stored arrays
 
 Datasets collected before ``object_shape`` was stored have no ``arrays`` entry and no such file;
-they load for every model that does not need the shapes (see :data:`OPTIONAL_ARRAYS`).
+they load for every model that does not need the shapes (see :data:`OPTIONAL_ARRAYS`). A
+variable-count dataset records ``num_objects_range`` ``[low, high]`` in its metadata
+(:mod:`kinet_rl.data.object_counts`).
 """
 
 from __future__ import annotations
@@ -32,7 +36,8 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 
 from kinet_rl.atomic import DISK_FULL_ERRNOS, DiskFullError, atomic_write_json
-from kinet_rl.keys import ACTION, OBJECT_POS, OBJECT_SHAPE, OBJECT_YAW, PIXELS
+from kinet_rl.data.object_counts import pad_objects
+from kinet_rl.keys import ACTION, OBJECT_COUNT, OBJECT_POS, OBJECT_SHAPE, OBJECT_YAW, PIXELS
 
 logger = logging.getLogger(__name__)
 
@@ -96,11 +101,15 @@ def stored_episodes(path: Path) -> tuple[int, bool]:
 
 
 def episode_array_specs(
-    episode_length: int, image_size: int, num_objects: int
+    episode_length: int, image_size: int, num_objects: int, variable_object_count: bool = False
 ) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
-    """Per-episode shape (without the leading E) and dtype of every stored array."""
+    """Per-episode shape (without the leading E) and dtype of every stored array.
+
+    ``variable_object_count`` adds the per-episode object count (``num_objects`` objects are
+    then the most an episode holds).
+    """
     t, h, n = episode_length, image_size, num_objects
-    return {
+    specs = {
         PIXELS: ((t + 1, h, h, 3), torch.uint8),
         ACTION: ((t, 4), torch.float32),
         OBJECT_POS: ((t + 1, n, 2), torch.float32),
@@ -108,6 +117,9 @@ def episode_array_specs(
         OBJECT_SHAPE: ((n, 8), torch.float32),
         "source_episode": ((), torch.int64),
     }
+    if variable_object_count:
+        specs[OBJECT_COUNT] = ((), torch.int64)
+    return specs
 
 
 def stored_array_specs(
@@ -115,7 +127,10 @@ def stored_array_specs(
 ) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
     """:func:`episode_array_specs` of the arrays a complete dataset's ``metadata`` says it stores."""
     specs = episode_array_specs(
-        metadata["episode_length"], metadata["image_size"], metadata["num_objects"]
+        metadata["episode_length"],
+        metadata["image_size"],
+        metadata["num_objects"],
+        variable_object_count=metadata.get("num_objects_range") is not None,
     )
     names = metadata.get("arrays", [name for name in specs if name not in OPTIONAL_ARRAYS])
     return {name: spec for name, spec in specs.items() if name in names}
@@ -143,8 +158,10 @@ class EpisodeWriter:
         num_episodes: episodes the finished dataset holds (disk space is reserved up front).
         episode_length: pushes per episode T.
         image_size: frame side H = W.
-        num_objects: objects per scene N.
+        num_objects: objects per scene N (with ``variable_object_count``, the most per scene).
         settings: JSON-able collection settings; a resumed run must present the same ones.
+        variable_object_count: episodes hold up to ``num_objects`` objects: each commit's
+            per-object arrays are NaN-padded and its object count is stored.
     """
 
     def __init__(
@@ -155,11 +172,15 @@ class EpisodeWriter:
         image_size: int,
         num_objects: int,
         settings: Mapping[str, Any],
+        variable_object_count: bool = False,
     ) -> None:
         self.path = Path(path)
         self.num_episodes = num_episodes
+        self.num_objects = num_objects
         self.settings = dict(settings)
-        self.specs = episode_array_specs(episode_length, image_size, num_objects)
+        self.specs = episode_array_specs(
+            episode_length, image_size, num_objects, variable_object_count
+        )
         progress_file = self.path / PROGRESS_FILE
         if progress_file.exists():
             progress = read_json(progress_file)
@@ -225,23 +246,28 @@ class EpisodeWriter:
             },
         )
 
-    def commit(self, episodes: TensorDictBase, processed: int, discarded: int) -> None:
+    def commit(self, episodes: TensorDictBase | None, processed: int, discarded: int) -> None:
         """Writes ``episodes`` [k] after the committed ones, syncs, then records progress.
 
         Args:
-            episodes: batch [k] with the stored arrays' keys.
+            episodes: batch [k] with the stored arrays' keys (for a variable-count dataset: of
+                one object count, unpadded), or None to record progress alone.
             processed: source episodes accounted for (kept or discarded) after this commit.
             discarded: unstable source episodes discarded so far.
         """
-        stop = self.committed + episodes.shape[0]
-        if stop > self.num_episodes:
-            raise ValueError(
-                f"Commit of {episodes.shape[0]} episodes overflows {self.num_episodes}."
-            )
-        self.storage[self.committed : stop] = episodes.select(*self.specs)
-        for name in self.specs:
-            with open(self.path / EPISODES_DIR / f"{name}.memmap", "rb+") as f:
-                os.fsync(f.fileno())
+        stop = self.committed
+        if episodes is not None:
+            stop += episodes.shape[0]
+            if stop > self.num_episodes:
+                raise ValueError(
+                    f"Commit of {episodes.shape[0]} episodes overflows {self.num_episodes}."
+                )
+            if OBJECT_COUNT in self.specs:
+                episodes = pad_objects(episodes, self.num_objects)
+            self.storage[self.committed : stop] = episodes.select(*self.specs)
+            for name in self.specs:
+                with open(self.path / EPISODES_DIR / f"{name}.memmap", "rb+") as f:
+                    os.fsync(f.fileno())
         self.committed, self.processed, self.discarded = stop, processed, discarded
         self._write_progress()
 

@@ -4,6 +4,8 @@ Every model offers ``object_rollout(geometry)``, an :class:`ObjectRollout` that 
 positions from the frame where a prediction starts and the logged pushes, with no ground truth from
 the predicted steps (KINet reads them off its keypoints: :mod:`kinet_rl.models.object_rollout`).
 Errors are in metres on the table, next to the no-motion baseline (every object stays put).
+Objects at NaN (the padding of a variable-count dataset, :mod:`kinet_rl.data.object_counts`)
+are left out of every error.
 """
 
 from __future__ import annotations
@@ -90,15 +92,18 @@ def split_errors(pred: Tensor, truth: Tensor, start: Tensor) -> dict[str, float]
     Args:
         pred: ``[B, N, 2]`` predicted positions.
         truth: ``[B, N, 2]`` true positions.
-        start: ``[B, N, 2]`` positions where the prediction started (to tell moved objects).
+        start: ``[B, N, 2]`` positions where the prediction started (to tell moved objects);
+            NaN for absent objects, which are not counted.
     """
     error = (pred - truth).norm(dim=-1)  # [B, N]
-    moved = (truth - start).norm(dim=-1) > MOVED_THRESHOLD_M
+    present = ~start.isnan().any(dim=-1)
+    motion = (truth - start).norm(dim=-1)
+    moved, unmoved = motion > MOVED_THRESHOLD_M, motion <= MOVED_THRESHOLD_M
     return {
-        "all": error.mean().item(),
+        "all": error[present].mean().item(),
         "moved": error[moved].mean().item() if moved.any() else float("nan"),
-        "unmoved": error[~moved].mean().item() if (~moved).any() else float("nan"),
-        "moved_fraction": moved.float().mean().item(),
+        "unmoved": error[unmoved].mean().item() if unmoved.any() else float("nan"),
+        "moved_fraction": moved[present].float().mean().item(),
     }
 
 

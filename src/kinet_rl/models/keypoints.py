@@ -198,6 +198,7 @@ class KeypointDetector(nn.Module):
         self.coarse_net = nn.Sequential(
             _conv_block(fine_ch, channels, 2), _conv_block(channels, channels)
         )
+        self.heatmap_head: nn.Module
         if heatmap_stride == 4:
             self.heatmap_head = nn.Conv2d(channels, num_keypoints, 1)
         else:

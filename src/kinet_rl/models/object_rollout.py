@@ -36,16 +36,17 @@ def keypoint_membership(kp: Tensor, obj: Tensor) -> Tensor:
     """Soft-free assignment weights of keypoints to objects at the start frame.
 
     Each keypoint belongs to its nearest object; an object chosen by no keypoint takes its nearest
-    keypoint as well, so every object has at least one keypoint.
+    keypoint as well, so every object has at least one keypoint. An object at NaN (absent: the
+    padding of a variable-count dataset) takes no keypoint from the others.
 
     Args:
         kp: [*B, K, 2] keypoint positions (any frame in which ``obj`` is expressed).
-        obj: [*B, N, 2] object positions in the same frame.
+        obj: [*B, N, 2] object positions in the same frame (NaN for absent objects).
 
     Returns:
         [*B, N, K] row-normalised weights: object n's motion is ``weights[n] @ keypoint_motion``.
     """
-    dist = pairwise_distance(kp, obj)  # [*B, K, N]
+    dist = pairwise_distance(kp, obj).nan_to_num(nan=torch.inf)  # [*B, K, N]
     member = torch.nn.functional.one_hot(dist.argmin(dim=-1), obj.shape[-2]).transpose(-1, -2)
     orphan = member.sum(dim=-1, keepdim=True) == 0  # [*B, N, 1]
     nearest_kp = torch.nn.functional.one_hot(dist.argmin(dim=-2), kp.shape[-2])  # [*B, N, K]
