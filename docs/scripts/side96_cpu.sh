@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Table I's side camera at 96 px (24x24 heatmaps), the default-scale study's fix for the side-camera
+# detector, at the cpu scale on one copy of the data: collect `tables_cpu_side96` (the cpu-scale
+# side-camera data rendered at 96 px), then KINet (seeds 0, 1, 2) and IN (seeds 0, 1, 2) on it, in
+# three chains of rows with one torch thread each (the three KINet seeds at once on 2 cores). Each row is
+# trained and scored by `python -m kinet_rl.tables`; its MPC stage is cut to 4 episodes (not
+# reported: the MPC tables are on the top camera). Run from the repository root:
+#
+#   bash docs/scripts/side96_cpu.sh
+#
+# Resumable: the collection and every row resume where they stopped, a finished row is skipped.
+set -euo pipefail
+export OMP_NUM_THREADS=1 MUJOCO_GL="${MUJOCO_GL:-egl}"
+PYTHON="${PYTHON:-python}"
+cpu_scale=('data.name=tables_cpu_{camera}96' env.image_size=96 data.num_episodes=1250
+  data.num_workers=2 data.chunk_episodes=25 data.generalization=null trainer.steps=10000
+  trainer.batch_size=32 trainer.eval_every=1000 trainer.checkpoint_every=1000 trainer.log_every=100
+  report.rearrangement_episodes=0)
+quoted=$(printf "'%s'," "${cpu_scale[@]}")
+common=(tables=cpu "tables.overrides=[${quoted%,}]" 'tables.generalization_models=[]'
+  'tables.mpc_budgets=null' '+tables.mpc_budgets={64x3:{num_candidates:64,optim_steps:3,top_k:8}}'
+  tables.eval.episodes=4 'tables.cameras=[side]' tables.mpc_camera=side)
+"$PYTHON" -m kinet_rl.collect +exp=blocks_sideview "${cpu_scale[@]/\{camera\}/side}"
+rows() {  # rows <run dir> <model> <seed> [<model> <seed> ...]: one after another
+  local dir=$1
+  shift
+  while (($#)); do
+    "$PYTHON" -m kinet_rl.tables "${common[@]}" "tables.models=[$1]" "tables.seeds=[$2]" \
+      "hydra.run.dir=$dir"
+    shift 2
+  done
+}
+mkdir -p runs
+rows runs/side96_a kinet 0 > runs/side96_a.log 2>&1 &
+rows runs/side96_b kinet 1 in 0 in 1 in 2 > runs/side96_b.log 2>&1 &
+rows runs/side96_c kinet 2 > runs/side96_c.log 2>&1 &
+wait
