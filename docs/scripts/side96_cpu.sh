@@ -21,15 +21,7 @@ common=(tables=cpu "tables.overrides=[${quoted%,}]" 'tables.generalization_model
   'tables.mpc_budgets=null' '+tables.mpc_budgets={64x3:{num_candidates:64,optim_steps:3,top_k:8}}'
   tables.eval.episodes=4 'tables.cameras=[side]' tables.mpc_camera=side)
 "$PYTHON" -m kinet_rl.collect +exp=blocks_sideview "${cpu_scale[@]/\{camera\}/side}"
-rows() {  # rows <run dir> <model> <seed> [<model> <seed> ...]: one after another
-  local dir=$1
-  shift
-  while (($#)); do
-    "$PYTHON" -m kinet_rl.tables "${common[@]}" "tables.models=[$1]" "tables.seeds=[$2]" \
-      "hydra.run.dir=$dir"
-    shift 2
-  done
-}
+source "$(dirname "$0")/table_rows.sh"
 mkdir -p runs
 rows runs/side96_a kinet 0 > runs/side96_a.log 2>&1 &
 rows runs/side96_b kinet 1 in 0 in 1 in 2 > runs/side96_b.log 2>&1 &

@@ -17,15 +17,7 @@ PYTHON="${PYTHON:-python}"
 common=(tables=cpu 'tables.generalization_models=[]' 'tables.mpc_budgets=null'
   '+tables.mpc_budgets={64x3:{num_candidates:64,optim_steps:3,top_k:8}}' tables.eval.episodes=4
   'tables.cameras=[side]' tables.mpc_camera=side)
-rows() {  # rows <run dir> <model> <seed> [<model> <seed> ...]: one after another
-  local dir=$1
-  shift
-  while (($#)); do
-    "$PYTHON" -m kinet_rl.tables "${common[@]}" "tables.models=[$1]" "tables.seeds=[$2]" \
-      "hydra.run.dir=$dir"
-    shift 2
-  done
-}
+source "$(dirname "$0")/table_rows.sh"
 rows runs/side_ablations_a kinet_determ 0 kinet_determ 1 > runs/side_ablations_a.log 2>&1 &
 rows runs/side_ablations_b kinet_determ 2 kinet_no_ctr 2 > runs/side_ablations_b.log 2>&1 &
 wait
