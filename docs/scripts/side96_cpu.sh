@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Table I's side camera at 96 px (24x24 heatmaps), the default-scale study's fix for the side-camera
 # detector, at the cpu scale on one copy of the data: collect `tables_cpu_side96` (the cpu-scale
-# side-camera data rendered at 96 px), then KINet (seeds 0, 1, 2) and IN (seeds 0, 1, 2) on it, in
+# side-camera data rendered at 96 px), then KINet, IN and IN-full (seeds 0, 1, 2 each) on it, in
 # three chains of rows with one torch thread each (the three KINet seeds at once on 2 cores). Each row is
 # trained and scored by `python -m kinet_rl.tables`; its MPC stage is cut to 4 episodes (not
 # reported: the MPC tables are on the top camera). Run from the repository root:
@@ -25,5 +25,5 @@ source "$(dirname "$0")/table_rows.sh"
 mkdir -p runs
 rows runs/side96_a kinet 0 > runs/side96_a.log 2>&1 &
 rows runs/side96_b kinet 1 in 0 in 1 in 2 > runs/side96_b.log 2>&1 &
-rows runs/side96_c kinet 2 > runs/side96_c.log 2>&1 &
+rows runs/side96_c kinet 2 in_full 0 in_full 1 in_full 2 > runs/side96_c.log 2>&1 &
 wait
