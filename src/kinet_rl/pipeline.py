@@ -31,8 +31,15 @@ from kinet_rl.config_schema import (
     settings_from,
     target_arguments,
 )
-from kinet_rl.data import PushDataset, collect_dataset, load_dataset, split_ranges
+from kinet_rl.data import (
+    DatasetMismatchError,
+    PushDataset,
+    collect_dataset,
+    load_dataset,
+    split_ranges,
+)
 from kinet_rl.data.collection import DEFAULT_SPLITS, check_collection
+from kinet_rl.data.dataset import ALL_SPLITS
 from kinet_rl.envs import make_env
 from kinet_rl.envs.factory import check_env_arguments
 from kinet_rl.envs.geometry import SceneGeometry
@@ -468,6 +475,33 @@ def check_dataset_for(model: nn.Module, dataset: PushDataset) -> None:
         dataset.check_fixed_object_count(type(model).__name__)
 
 
+def held_out_sets(settings: ExperimentSettings, model: nn.Module) -> dict[str, PushDataset]:
+    """The generalization sets a training run's report scores, every episode of each, by name.
+
+    A set is scored when it shows the training scene's task, camera and image size; a set of
+    another object count only for a model that handles any count (KINet, V-CDN). The others are
+    skipped with a log line.
+    """
+    main, *extra = dataset_jobs(settings.env, settings.data)
+    sets = {}
+    for job in extra:
+        name = job.arguments["name"]
+        differs = [k for k in DATASET_ENV_KEYS if job.env[k] != main.env[k]]
+        if trains_on_variable_object_counts(model) and "num_objects" in differs:
+            differs.remove("num_objects")
+        if differs:
+            log.info("Not scoring held-out set %s: its %s differ from training's", name, differs)
+            continue
+        dataset = load_dataset(job.path, ALL_SPLITS)
+        try:
+            check_dataset_for(model, dataset)
+        except DatasetMismatchError as err:
+            log.info("Not scoring held-out set %s: %s", name, err)
+            continue
+        sets[name] = dataset
+    return sets
+
+
 def run_experiment(
     settings: ExperimentSettings,
     build_model: Callable[[], nn.Module],
@@ -529,6 +563,7 @@ def _train_and_evaluate(
         settings.report.horizons,
         settings.report.num_sequences,
         logger,
+        held_out_sets(settings, model),
     )
     trainer = Trainer(
         loss,

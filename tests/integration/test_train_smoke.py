@@ -92,6 +92,11 @@ def test_run_writes_model_report_images_and_logs(smoke_run: Path) -> None:
     assert 0.0 <= results["keypoint_accuracy"] <= 1.0
     assert set(results["forward_error_m"]) == {"1", "3"}
     assert "| pushes ahead |" in (run / "report.md").read_text()
+    two_objects = results["held_out"]["smoke_2obj"]  # the generalization set, scored too
+    assert set(two_objects["forward_error_m"]) == {"1", "3"}
+    assert 0.0 <= two_objects["keypoint_accuracy"] <= 1.0
+    assert two_objects["no_motion_error_m"] != results["no_motion_error_m"]
+    assert "## Held-out set `smoke_2obj`" in (run / "report.md").read_text()
     for name in ("keypoints_final.png", "reconstruction_final.png", "keypoints_step000003.png"):
         assert (run / "images" / name).stat().st_size > 0
     assert list((run / "logs").rglob("*.csv")), "CSV logger wrote no scalars"

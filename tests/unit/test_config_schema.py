@@ -10,6 +10,7 @@ from typing import Any
 
 import pytest
 from hydra import compose, initialize_config_dir
+from hydra.errors import ConfigCompositionException
 from omegaconf import OmegaConf
 
 from kinet_rl import evaluate, plan, train
@@ -24,6 +25,10 @@ CONF = Path(config_dir())
 EXPERIMENTS = sorted(p.stem for p in (CONF / "exp").glob("*.yaml"))
 SCALES = sorted(p.stem for p in (CONF / "scale").glob("*.yaml"))
 TABLE_SCALES = sorted(p.stem for p in (CONF / "tables").glob("*.yaml"))
+#: Experiments whose study fixes its scale (their defaults list one; `+scale` is refused).
+SCALED = [
+    name for name in EXPERIMENTS if "- /scale:" in (CONF / "exp" / f"{name}.yaml").read_text()
+]
 
 
 def compose_config(*overrides: str, config_name: str = "config"):
@@ -44,12 +49,32 @@ def tables_settings(*overrides: str) -> TablesSettings:
     "overrides",
     [[]]
     + [[f"+exp={name}"] for name in EXPERIMENTS]
-    + [[f"+exp={name}", f"+scale={scale}"] for name in EXPERIMENTS for scale in SCALES],
+    + [
+        [f"+exp={name}", f"+scale={scale}"]
+        for name in EXPERIMENTS
+        if name not in SCALED
+        for scale in SCALES
+    ],
 )
 def test_every_shipped_experiment_and_scale_passes(overrides: list[str]) -> None:
     settings = check_config(container(*overrides))
     assert isinstance(settings.scene, SceneSettings)
     assert settings.name == (overrides[0].removeprefix("+exp=") if overrides else "default")
+
+
+def test_the_unseen_objects_study_holds_out_objects_by_name_at_the_cpu_scale() -> None:
+    assert SCALED == ["ycb_topview_unseen"]
+    config = container("+exp=ycb_topview_unseen")
+    ((name, held_out),) = config["data"]["generalization"].items()
+    seen, unseen = set(config["env"]["ycb_objects"]), set(held_out["env"]["ycb_objects"])
+    assert len(seen) == 9 and len(unseen) == 3 and not seen & unseen
+    assert (
+        config["trainer"]["steps"]
+        == container("+exp=ycb_topview", "+scale=cpu")["trainer"]["steps"]
+    )
+    assert len({config["data"]["name"], name, "ycb_top64_cpu"}) == 3  # its own datasets
+    with pytest.raises(ConfigCompositionException, match="scale appears more than once"):
+        container("+exp=ycb_topview_unseen", "+scale=cpu")
 
 
 def test_keypoint_models_take_k_from_the_experiment_and_the_others_have_none() -> None:

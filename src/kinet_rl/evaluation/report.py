@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -124,6 +125,8 @@ class TrainingReport:
         num_sequences: Test sequences per forward-prediction score.
         logger: The run's TorchRL logger; the image summaries go to it too (``val/<name>`` at
             each validation, ``test/<name>`` at the end), not only to ``images/``.
+        held_out: Further datasets scored like the test split at the end, by name (the
+            experiment's generalization sets, e.g. unseen objects or object counts).
     """
 
     run_dir: Path
@@ -135,6 +138,7 @@ class TrainingReport:
     horizons: tuple[int, ...] = (1, 5, 10)
     num_sequences: int = 256
     logger: Logger | None = None
+    held_out: Mapping[str, object] = field(default_factory=dict)
 
     @property
     def has_keypoints(self) -> bool:
@@ -172,40 +176,59 @@ class TrainingReport:
                 log_media(self.logger, f"{split}/{name}", path, step)
         return list(paths.values())
 
-    def final(self, step: int) -> dict:
-        """Evaluates on the test split, writes ``report.md`` and final images; returns the numbers."""
-        self.model.eval()
+    def score(self, dataset) -> tuple[dict, list[str]]:
+        """Forward errors (and for keypoint models keypoint accuracy and image errors) on
+        ``dataset``: its numbers and its report sections."""
         rollout = self.model.object_rollout(self.geometry)
         floor = self.model.detector_floor(self.geometry) if self.has_keypoints else None
-        errors = forward_errors(rollout, self.test, self.horizons, self.num_sequences, floor=floor)
+        errors = forward_errors(rollout, dataset, self.horizons, self.num_sequences, floor=floor)
         results: dict = {
-            "step": step,
-            "model": self.model_name,
             "forward_error_m": {h: e["model"] for h, e in errors.items()},
             "no_motion_error_m": {h: e["no_motion"] for h, e in errors.items()},
             "forward_errors_m": errors,
         }
-        sections = [f"# {self.exp_name}: {self.model_name} after {step} steps\n"]
+        sections = []
         image_mse = None
         if self.has_keypoints:
             radius = hit_radius(self.geometry.image_size)
-            accuracy = self.accuracy(self.test)
+            accuracy = self.accuracy(dataset)
             image_mse = image_prediction_errors(
-                self.model, self.test, self.horizons, self.num_sequences
+                self.model, dataset, self.horizons, self.num_sequences
             )
             results.update(keypoint_accuracy=accuracy, hit_radius_px=radius, image_mse=image_mse)
             sections.append(
-                f"Held-out test episodes. **Keypoint accuracy: {100 * accuracy:.1f}%** of the "
-                f"objects in view have a detected keypoint within {radius:.1f} px of their centre.\n"
+                f"**Keypoint accuracy: {100 * accuracy:.1f}%** of the objects in view have a "
+                f"detected keypoint within {radius:.1f} px of their centre.\n"
             )
         sections.append(
-            "Forward prediction on held-out test episodes: open-loop rollouts of the logged "
-            "pushes, errors in millimetres on the table (protocol: docs/kinet.md).\n"
+            "Forward prediction: open-loop rollouts of the logged pushes, errors in millimetres "
+            "on the table (protocol: docs/kinet.md).\n"
         )
         sections.append(forward_table(errors, image_mse, self.model_name) + "\n")
+        return results, sections
+
+    def final(self, step: int) -> dict:
+        """Evaluates on the test split and every held-out set, writes ``report.md`` and final
+        images; returns the numbers (a held-out set's under ``held_out/<name>``)."""
+        self.model.eval()
+        scores, sections = self.score(self.test)
+        results: dict = {"step": step, "model": self.model_name, **scores}
+        sections = [
+            f"# {self.exp_name}: {self.model_name} after {step} steps\n",
+            "## Held-out test episodes\n",
+            *sections,
+        ]
         if self.has_keypoints:
             paths = self.write_images(self.test, "test", "final", step)
             sections.append("\n".join(f"![{p.stem}](images/{p.name})" for p in paths) + "\n")
+        if self.held_out:
+            results["held_out"] = {}
+        for name, dataset in self.held_out.items():
+            results["held_out"][name], extra = self.score(dataset)
+            sections += [
+                f"## Held-out set `{name}` (every episode, none seen in training)\n",
+                *extra,
+            ]
         atomic_write_text(self.run_dir / "report.md", "\n".join(sections))
         log.info("Wrote %s", self.run_dir / "report.md")
         return results
