@@ -3,9 +3,9 @@
 # scale"): the top camera (KINet and IN) and the side camera at 96 px (KINet: the image-size
 # study against the 64 px run), each trained and scored by `python -m kinet_rl.train`, then
 # planned with the same budget on the same 100 test episodes (T = 30) by `kinet_rl.evaluate`.
-# 8,000 training steps for every model (the cpu scale's 10,000 did not fit the session that ran
+# 8,000 training steps for KINet (the cpu scale's 10,000 did not fit the session that ran
 # this; KINet's training has no schedule tied to the step count, so a run stopped at 8,000 is this
-# run). Two chains at once, one torch thread each, on 2 cores. Run from the repository root with
+# run); IN the cpu scale's 10,000. Two chains at once, one torch thread each, on 2 cores. Run from the repository root with
 # KINET_RL_YCB_DIR set:
 #
 #   bash docs/scripts/ycb_cpu.sh
@@ -18,7 +18,7 @@ mpc=(eval.episodes=100 eval.num_steps=30 "eval.geometries=[train]" "eval.backgro
   eval.workers=2)
 top() {
   "$PYTHON" -m kinet_rl.train +exp=ycb_topview +scale=cpu trainer.steps=8000
-  "$PYTHON" -m kinet_rl.train +exp=ycb_topview_in +scale=cpu trainer.steps=8000
+  "$PYTHON" -m kinet_rl.train +exp=ycb_topview_in +scale=cpu  # 10,000 steps (~5 min)
   "$PYTHON" -m kinet_rl.evaluate +exp=ycb_topview +scale=cpu "${mpc[@]}" eval.videos=1 \
     "eval.methods=[kinet_keypoints_l2,random,oracle]" "eval.num_objects=[1,2,3,4,5]" \
     eval.generalization_episodes=10
