@@ -4,9 +4,9 @@
 # study against the 64 px run), each trained and scored by `python -m kinet_rl.train`, then
 # planned with the same budget on the same 100 test episodes (T = 30) by `kinet_rl.evaluate`.
 # 8,000 training steps for KINet (the cpu scale's 10,000 did not fit the session that ran
-# this; KINet's training has no schedule tied to the step count, so a run stopped at 8,000 is this
-# run); IN the cpu scale's 10,000. Two chains at once, one torch thread each, on 2 cores. Run from the repository root with
-# KINET_RL_YCB_DIR set:
+# this; KINet's training has no schedule tied to the step count, so a run stopped at 8,000 is
+# this run); IN the cpu scale's 10,000. Two chains at once, one torch thread each, on 2 cores.
+# Run from the repository root with KINET_RL_YCB_DIR set:
 #
 #   bash docs/scripts/ycb_cpu.sh
 #

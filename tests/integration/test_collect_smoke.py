@@ -13,15 +13,11 @@ from pathlib import Path
 
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
-from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from kinet_rl.atomic import DirectoryInUseError, directory_lock
-from kinet_rl.configs import config_dir
 from kinet_rl.data import load_dataset
 from kinet_rl.data.object_counts import chunk_object_count
-from kinet_rl.pipeline import ExperimentSettings, collect_datasets, held_out_sets
 
 pytestmark = pytest.mark.slow
 
@@ -76,12 +72,6 @@ def live_processes(session: int) -> list[int]:
         if int(sid) == session and state != "Z":
             pids.append(int(stat.parent.name))
     return pids
-
-
-def composed(*overrides: str) -> dict:
-    with initialize_config_dir(config_dir(), version_base="1.3"):
-        cfg = compose(config_name="config", overrides=list(overrides))
-    return OmegaConf.to_container(cfg, resolve=True)
 
 
 def stored(path: Path) -> TensorDict:
@@ -202,22 +192,3 @@ def test_a_count_range_collects_each_chunk_with_its_object_count(tmp_path: Path)
     expect = {"num_objects": 3, "num_objects_range": [1, 3]}
     data = load_dataset(tmp_path / "range" / "smoke", expect=expect)
     assert data.sample(4, horizon=2)["pixels"].shape == (4, 32, 32, 3)
-
-
-def test_the_report_scores_the_generalization_sets_of_the_training_scene(
-    tmp_path, tiny_kinet, tiny_baseline
-):
-    """A set of another camera is never scored; one of another object count only for a model
-    that handles any count; every episode of a scored set is used (none was trained on)."""
-    settings = ExperimentSettings.from_container(composed(
-        f"data.root={tmp_path}", "data.num_episodes=3", "data.num_workers=1",
-        "data.chunk_episodes=1", "env.max_steps=3", "env.image_size=32", "report.horizons=[1]",
-        "data.splits={train: 0.34, val: 0.33, test: 0.33}",
-        "++data.generalization={same: {num_episodes: 4}, five: {env: {num_objects: 5}}, "
-        "side: {env: {camera: side}}}",
-    ))  # fmt: skip
-    collect_datasets(settings.env, settings.data)
-    by_count = held_out_sets(settings, tiny_kinet())
-    assert sorted(by_count) == ["five", "same"]
-    assert by_count["same"].num_episodes == 4 and by_count["five"].num_objects == 5
-    assert sorted(held_out_sets(settings, tiny_baseline("in", num_objects=3))) == ["same"]

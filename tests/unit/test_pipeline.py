@@ -14,7 +14,14 @@ from kinet_rl.configs import config_dir
 from kinet_rl.envs import SceneSettings
 from kinet_rl.models import KINetWorldModel
 from kinet_rl.models.checkpointing import checkpoint_scene
-from kinet_rl.pipeline import ExperimentSettings, check_config, dataset_jobs, run_experiment
+from kinet_rl.pipeline import (
+    ExperimentSettings,
+    check_config,
+    collect_datasets,
+    dataset_jobs,
+    held_out_sets,
+    run_experiment,
+)
 
 EXPERIMENTS = sorted(p.stem for p in (Path(config_dir()) / "exp").glob("*.yaml"))
 
@@ -109,3 +116,23 @@ def test_a_count_range_is_for_the_main_dataset_of_a_keypoint_model(model):
         fixed.dataset_expect["num_objects"] == 3
         and fixed.dataset_expect["num_objects_range"] is None
     )
+
+
+@pytest.mark.slow  # collects episodes on MuJoCo
+def test_the_report_scores_the_generalization_sets_of_the_training_scene(
+    tmp_path, tiny_kinet, tiny_baseline
+):
+    """A set of another camera is never scored; one of another object count only for a model
+    that handles any count; every episode of a scored set is used (none was trained on)."""
+    settings = settings_of(
+        f"data.root={tmp_path}", "data.num_episodes=3", "data.num_workers=1",
+        "data.chunk_episodes=1", "env.max_steps=3", "env.image_size=32", "report.horizons=[1]",
+        "data.splits={train: 0.34, val: 0.33, test: 0.33}",
+        "++data.generalization={same: {num_episodes: 4}, five: {env: {num_objects: 5}}, "
+        "side: {env: {camera: side}}}",
+    )  # fmt: skip
+    collect_datasets(settings.env, settings.data)
+    by_count = held_out_sets(settings, tiny_kinet())
+    assert sorted(by_count) == ["five", "same"]
+    assert by_count["same"].num_episodes == 4 and by_count["five"].num_objects == 5
+    assert sorted(held_out_sets(settings, tiny_baseline("in", num_objects=3))) == ["same"]
