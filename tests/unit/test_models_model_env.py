@@ -21,6 +21,7 @@ from kinet_rl.models import (
     GraphDistanceReward,
     GraphSimilarityReward,
     KeypointChamferReward,
+    KeypointDistanceReward,
     KeypointL2Reward,
     KINetModelEnv,
     chamfer_distance,
@@ -33,6 +34,7 @@ REWARD_CLASSES = [
     GraphDistanceReward,
     KeypointChamferReward,
     KeypointL2Reward,
+    KeypointDistanceReward,
 ]
 
 
@@ -49,6 +51,7 @@ def test_rewards_by_command_line_name() -> None:
         "graph_distance": GraphDistanceReward,
         "keypoints": KeypointChamferReward,
         "keypoints_l2": KeypointL2Reward,
+        "keypoints_distance": KeypointDistanceReward,
     } == REWARDS
 
 
@@ -93,6 +96,8 @@ def test_step_reward_matches_the_definition(reward, tiny_kinet, random_images) -
         expected = -(pred_nodes - state[GOAL_KP_NODE_EMB]).pow(2).sum(-1).mean(-1)
     elif reward is KeypointL2Reward:  # keypoint k against goal keypoint k
         expected = -(pred.next_pos - state[GOAL_KP_POS]).norm(dim=-1).pow(2).mean(-1)
+    elif reward is KeypointDistanceReward:
+        expected = -(pred.next_pos - state[GOAL_KP_POS]).norm(dim=-1).mean(-1)
     else:
         expected = -chamfer_distance(pred.next_pos, state[GOAL_KP_POS])
     assert torch.allclose(out["reward"], expected.unsqueeze(-1), atol=1e-5)

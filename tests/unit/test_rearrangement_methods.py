@@ -15,7 +15,7 @@ def test_every_method_is_declared_once_with_a_label() -> None:
     kinet = [m.name for m in METHODS.values() if m.needs == "kinet"]
     assert kinet == [
         "kinet_graph", "kinet_graph_dot", "kinet_graph_distance", "kinet_keypoints",
-        "kinet_keypoints_l2",
+        "kinet_keypoints_l2", "kinet_keypoints_distance",
     ]  # fmt: skip
     assert {m.name for m in METHODS.values() if m.needs is None} == {"random", "oracle"}
 

@@ -121,12 +121,26 @@ class KeypointL2Reward:
         return -(prediction.next_pos - goal_pos).pow(2).sum(-1).mean(-1)
 
 
+class KeypointDistanceReward:
+    """Minus the mean over keypoints of the distance ``|x_k - g_k|`` (not squared).
+
+    The index-matched keypoint cost of :class:`KeypointL2Reward` with the robustness of V-CDN's
+    cost (``kinet_rl.baselines.model_env``): a keypoint that the detector placed far from its goal
+    counterpart (on the table in one image, on an object in the other) weighs in linearly, so it
+    does not dominate the choice of push.
+    """
+
+    def __call__(self, interaction, prediction, feat, goal_nodes, goal_pos) -> Tensor:
+        return -(prediction.next_pos - goal_pos).norm(dim=-1).mean(-1)
+
+
 #: The rewards by their command-line names (``python -m kinet_rl.plan --reward``).
 REWARDS: dict[str, type[KINetReward]] = {
     "graph": GraphSimilarityReward,
     "graph_distance": GraphDistanceReward,
     "keypoints": KeypointChamferReward,
     "keypoints_l2": KeypointL2Reward,
+    "keypoints_distance": KeypointDistanceReward,
 }
 
 

@@ -21,6 +21,7 @@ from kinet_rl.models.model_env import (
     GraphDistanceReward,
     GraphSimilarityReward,
     KeypointChamferReward,
+    KeypointDistanceReward,
     KeypointL2Reward,
     KINetReward,
 )
@@ -145,6 +146,13 @@ METHODS: dict[str, Method] = {
             "MPC on index-matched keypoint positions (L2)",
             "kinet",
             _kinet(KeypointL2Reward),
+            IMAGES,
+        ),
+        Method(
+            "kinet_keypoints_distance",
+            "MPC on index-matched keypoint distances (not squared)",
+            "kinet",
+            _kinet(KeypointDistanceReward),
             IMAGES,
         ),
         Method("random", "Random pushes", None, lambda ctx: RandomController(ctx.seeds), ()),
