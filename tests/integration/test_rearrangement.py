@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -218,3 +219,14 @@ def test_batched_episodes_run_as_they_do_one_at_a_time(tiny_kinet) -> None:
     (comparison,) = alone.values()
     finals = {m: [r.distances[-1] for r in rs] for m, rs in comparison.items()}
     assert len(set(finals["random"])) == 3  # the episodes differ: the test compares something
+
+
+@pytest.mark.skipif(not os.environ.get("KINET_RL_YCB_DIR"), reason="YCB assets needed")
+def test_episodes_of_held_out_ycb_objects_draw_only_those() -> None:
+    held_out = ("004_sugar_box", "007_tuna_fish_can", "025_mug")
+    scene = SceneSettings(task="ycb", image_size=32, ycb_objects=held_out)
+    episode = make_episode(scene, TaskSettings(goal_pushes=2, min_goal_distance=0.01), 50000)
+    try:
+        assert set(episode.env.task.active) == {f"ycb_{name}" for name in held_out}
+    finally:
+        episode.close()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 from omegaconf import OmegaConf
 
+from kinet_rl.config_schema import ConfigError
 from kinet_rl.envs import SceneSettings
 from kinet_rl.rearrangement.settings import (
     DEFAULT_METHODS,
@@ -69,3 +70,17 @@ def test_as_dict_round_trips_through_from_dicts(yaml_settings) -> None:
     assert (
         RearrangementSettings.from_dicts({**eval_cfg, **plain["task"]}, plain["scene"]) == settings
     )
+
+
+def test_ycb_object_lists_reach_every_condition_and_are_checked(conf_dir) -> None:
+    eval_cfg = OmegaConf.to_container(OmegaConf.load(conf_dir / "eval" / "rearrange.yaml"))
+    env_cfg = OmegaConf.to_container(OmegaConf.load(conf_dir / "env" / "ycb.yaml"))
+    held_out = ["004_sugar_box", "007_tuna_fish_can", "025_mug"]
+    settings = RearrangementSettings.from_dicts(eval_cfg, {**env_cfg, "ycb_objects": held_out})
+    assert {c.scene.ycb_objects for c in settings.conditions()} == {tuple(held_out)}
+    default = RearrangementSettings.from_dicts(eval_cfg, env_cfg)
+    assert default.scene.ycb_objects is None and default.as_dict() != settings.as_dict()
+    with pytest.raises(ConfigError, match="ycb_objects.*null for task blocks"):
+        SceneSettings(task="blocks", ycb_objects=("025_mug",))
+    with pytest.raises(ConfigError, match="ycb_objects.*non-empty list"):
+        SceneSettings(task="ycb", ycb_objects=())

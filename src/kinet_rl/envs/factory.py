@@ -70,7 +70,8 @@ def make_dm_env(
         ycb_objects: names of the YCB objects to draw from (default: all in the manifest).
         settings: push speeds and thresholds (default: ``DEFAULT_PUSH_SETTINGS[task]``).
     """
-    SceneSettings(task, num_objects, camera, image_size, geometry, background)  # checks them
+    objects = None if ycb_objects is None else tuple(ycb_objects)
+    SceneSettings(task, num_objects, camera, image_size, geometry, background, objects)  # checks
     workspace = workspace_for(task)
     candidates = None
     if task == "blocks":

@@ -48,6 +48,9 @@ class SceneSettings:
     image_size: int = 64
     geometry: str = "train"
     background: str = "fixed"
+    #: The YCB objects to draw from, by name (``None``: every object of the manifest). A scene
+    #: of held-out objects differs from the training scene only here.
+    ycb_objects: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         for name, choices in (
@@ -65,6 +68,14 @@ class SceneSettings:
             f"an integer from 1 to {MAX_OBJECTS}",
         )
         check_image_size(self.image_size)
+        if self.ycb_objects is not None:
+            require(self.task == "ycb", "ycb_objects", self.ycb_objects, "null for task blocks")
+            require(
+                len(self.ycb_objects) > 0,
+                "ycb_objects",
+                self.ycb_objects,
+                "null (every object) or a non-empty list of YCB object names",
+            )
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any]) -> SceneSettings:
