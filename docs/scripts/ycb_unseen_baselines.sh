@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
-# YCBObjs at the cpu scale, top camera (docs/results.md, "YCBObjs: unseen objects and the
-# baselines"): the unseen-objects study (trained on 9 of the 12 YCB objects, scored and planned on
-# the other 3 beside the seen ones) and the Forw, ForwInv, VisIN and V-CDN rows on `ycb_top64_cpu`
-# (the data of docs/scripts/ycb_cpu.sh's top-camera KINet run). KINet and V-CDN train 8,000 steps
-# as that run did; the other baselines the cpu scale's 10,000. MPC: the same 100 test episodes
-# (T = 30) and budget (64 x 3) as docs/scripts/ycb_cpu.sh. Two chains at once, one torch thread
-# each, on 2 cores. Run from the repository root with KINET_RL_YCB_DIR set:
+# YCBObjs at the cpu scale, top camera (docs/results.md, "YCBObjs, unseen objects and the
+# baselines"): the unseen-objects study (trained on 9 of the 12 YCB objects, scored and planned
+# on the other 3 beside the seen ones) and the KINet-determ, Forw, ForwInv, VisIN and V-CDN rows
+# on `ycb_top64_cpu` (the data of docs/scripts/ycb_cpu.sh's top-camera KINet run). KINet,
+# KINet-determ and V-CDN train 8,000 steps as that run did; the other baselines the cpu scale's
+# 10,000. MPC: the same 100 test episodes (T = 30) and budget (64 x 3) as docs/scripts/ycb_cpu.sh.
+# Three chains at once, one torch thread each, on 2 cores. Run from the repository root with
+# KINET_RL_YCB_DIR set:
 #
 #   bash docs/scripts/ycb_unseen_baselines.sh
 #
@@ -36,6 +37,8 @@ baselines() {
   done
 }
 mkdir -p runs
+"$PYTHON" -m kinet_rl.train +exp=ycb_topview_determ +scale=cpu trainer.steps=8000 \
+  > runs/ycb_determ.log 2>&1 &
 unseen > runs/ycb_unseen.log 2>&1 &
 baselines > runs/ycb_baselines.log 2>&1 &
 wait
