@@ -90,6 +90,23 @@ def test_keypoint_models_take_k_from_the_experiment_and_the_others_have_none() -
     assert (ycb.task, ycb.mpc_camera) == ("ycb", "side")
 
 
+def test_kinet_plans_with_the_cost_chosen_on_validation_for_its_task() -> None:
+    """Unsquared keypoint distances on YCBObjs, squared on BlockObjs (docs/results.md); V-CDN
+    plans with its own model whichever the task."""
+    expected = {
+        "ycb_sideview": "kinet_keypoints_distance",
+        "ycb_topview": "kinet_keypoints_distance",
+        "ycb_topview_unseen": "kinet_keypoints_distance",
+        "ycb_sideview_determ": "kinet_keypoints_distance",
+        "blocks_topview": "kinet_keypoints_l2",
+        "ycb_topview_vcdn": "model_mpc",
+    }
+    for exp, method in expected.items():
+        eval_cfg = container(f"+exp={exp}")["eval"]
+        assert eval_cfg["kinet_method"] == method, exp
+        assert method in eval_cfg["methods"], exp
+
+
 @pytest.mark.parametrize("scale", TABLE_SCALES)
 def test_every_tables_scale_and_its_rows_pass(scale: str) -> None:
     tables = tables_settings(f"tables={scale}")
