@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# YCBObjs at the cpu scale, side camera at 96 px (docs/results.md, "The side camera at 96 px:
-# three KINet seeds and the baselines"): KINet's training seeds 1 and 2 beside docs/scripts/
+# YCBObjs at the cpu scale, side camera at 96 px (docs/results.md, "YCBObjs, the side camera at
+# 96 px over three training seeds, and its baselines"): KINet's training seeds 1 and 2 beside docs/scripts/
 # ycb_cpu.sh's seed 0 (8,000 steps each, as that run), planned with the YCB experiments'
 # validated cost (kinet_keypoints_distance) on the same 100 test episodes (T = 30, 64 x 3), and
 # the Forw, ForwInv and VisIN rows on the same data (`ycb_side96_cpu`, the cpu scale's 10,000
