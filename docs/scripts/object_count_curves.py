@@ -16,20 +16,27 @@ from kinet_rl.rearrangement.report import plot_curves
 CELL = re.compile(r"n(?P<n>\d+)_geom_(?P<geometry>\w+)")
 
 
+def count_cells(path: Path) -> tuple[str, dict[tuple[int, str], dict]]:
+    """The run's KINet method and its summary cells by (object count, geometry)."""
+    data = json.loads(path.read_text())
+    method = data["settings"]["kinet_method"]
+    cells = {
+        (int(match["n"]), match["geometry"]): cell[method]
+        for name, cell in data["summary"].items()
+        if (match := CELL.fullmatch(name)) and method in cell
+    }
+    if not cells:
+        raise SystemExit(f"{path} has no object-count cells of {method}; run with eval.num_objects")
+    return method, cells
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("json", type=Path)
     parser.add_argument("out", type=Path)
     args = parser.parse_args()
-    data = json.loads(args.json.read_text())
-    method = data["settings"]["kinet_method"]
-    curves = {
-        f"{match['n']} objects ({match['geometry']})": cell[method]
-        for name, cell in data["summary"].items()
-        if (match := CELL.fullmatch(name)) and method in cell
-    }
-    if not curves:
-        raise SystemExit(f"{args.json} has no object-count cells of {method}; run with eval.num_objects")
+    method, cells = count_cells(args.json)
+    curves = {f"{n} objects ({geometry})": cell for (n, geometry), cell in cells.items()}
     print(plot_curves(curves, {}, args.out, f"MPC by object count: {method}"))
 
 
