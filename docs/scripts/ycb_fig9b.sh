@@ -5,7 +5,8 @@
 # 256 test sequences and planned on the same 100 test episodes (seeds 50000-50099, T = 30,
 # 64 x 3, the validated cost kinet_keypoints_distance). Two runs at once, one torch thread and
 # one MPC worker each, on 2 cores (~20 min collection if the data is absent, then ~80 min per
-# pair of trainings and ~10 min per MPC run). Run from the repository root with KINET_RL_YCB_DIR:
+# pair of trainings and ~10 min per MPC run, estimated from the K = 9 runs: not run yet). Run from
+# the repository root with KINET_RL_YCB_DIR set:
 #
 #   bash docs/scripts/ycb_fig9b.sh            # K = 3, 6 and 12
 #   bash docs/scripts/ycb_fig9b.sh 3 12       # only these K
