@@ -4,9 +4,10 @@
 # data (`ycb_side96_cpu`, 3 objects), the same 8,000 steps and seed 0, each scored on the same
 # 256 test sequences and planned on the same 100 test episodes (seeds 50000-50099, T = 30,
 # 64 x 3, the validated cost kinet_keypoints_distance). Two runs at once, one torch thread and
-# one MPC worker each, on 2 cores (~20 min collection if the data is absent, then ~80 min per
-# pair of trainings and ~10 min per MPC run, estimated from the K = 9 runs: not run yet). Run from
-# the repository root with KINET_RL_YCB_DIR set:
+# one MPC worker each, on 2 cores. Measured on a 2-core Intel Xeon (docs/results.md, "Fig. 9b"):
+# collection 13 min; with K = 3, 6 and 12 all training at once (`... 3 6` and `... 12` started
+# side by side) 53, 62 and 94 min; MPC 4-7 min per 100 episodes. Run from the repository root
+# with KINET_RL_YCB_DIR set:
 #
 #   bash docs/scripts/ycb_fig9b.sh            # K = 3, 6 and 12
 #   bash docs/scripts/ycb_fig9b.sh 3 12       # only these K
