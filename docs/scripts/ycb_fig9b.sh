@@ -6,7 +6,7 @@
 # 64 x 3, the validated cost kinet_keypoints_distance). Two runs at once, one torch thread and
 # one MPC worker each, on 2 cores. Measured on a 2-core Intel Xeon (docs/results.md, "Fig. 9b"):
 # collection 13 min; with K = 3, 6 and 12 all training at once (`... 3 6` and `... 12` started
-# side by side) 53, 62 and 94 min; MPC 4-7 min per 100 episodes. Run from the repository root
+# side by side) 53, 62 and 94 min; MPC 3-7 min per 100 episodes. Run from the repository root
 # with KINET_RL_YCB_DIR set:
 #
 #   bash docs/scripts/ycb_fig9b.sh            # K = 3, 6 and 12
