@@ -3,8 +3,9 @@
 Each ``--run K SEED RESULTS REARRANGEMENT`` names one trained model: its training report
 (``results.json``: keypoint accuracy, forward errors of the model, no motion and detector floor)
 and its rearrangement JSON (final distance to the goal of ``--method``). Prints a markdown table
-(one row per run) and saves a plot of the final distance against K, with 95%-interval bars over
-episodes and the mean start distance.
+(one row per run), a second table over the training seeds of each K (mean and 95% interval,
+Student's t) and saves a plot of the final distance against K: each run with its 95%-interval
+bars over episodes, the mean over seeds and the mean start distance.
 
 Usage: python docs/scripts/keypoint_count_study.py out.png \
     --run 3 0 runs/k3/results.json runs/k3/rearrangement/rearrangement.json \
@@ -18,6 +19,7 @@ import json
 from pathlib import Path
 
 from kinet_rl.evaluation.images import save_line_plot
+from kinet_rl.stats import mean_interval
 
 
 def row(k: int, seed: int, results: Path, rearrangement: Path, method: str) -> dict:
@@ -44,6 +46,12 @@ def row(k: int, seed: int, results: Path, rearrangement: Path, method: str) -> d
         "success": mpc["success_rate"],
         "episodes": mpc["episodes"],
     }
+
+
+def over_seeds(values: list[float]) -> str:
+    """Mean and 95% interval over seeds (a single seed has no interval)."""
+    mean, half = mean_interval(values)
+    return f"{mean:.1f}" if half is None else f"{mean:.1f} ± {half:.1f}"
 
 
 def main() -> None:
@@ -73,6 +81,14 @@ def main() -> None:
         f"\nno motion: {rows[0]['no_motion'][0]:.1f} / {rows[0]['no_motion'][1]:.1f} mm "
         f"(1 / 10 pushes); MPC start {rows[0]['start']:.1f} mm, {rows[0]['episodes']} episodes"
     )
+    ks = sorted({r["k"] for r in rows})
+    by_k = {k: [r for r in rows if r["k"] == k] for k in ks}
+    print("\nover training seeds (mean ± 95% interval, Student's t):\n")
+    print("| K | seeds | keypoint accuracy [%] | 1 push [mm] | 1 push, moved | MPC final [mm] |")
+    print("|---:|---:|---:|---:|---:|---:|")
+    for k, mine in by_k.items():
+        cells = [over_seeds([r[key] for r in mine]) for key in ("accuracy", "one", "one_moved", "final")]
+        print(f"| {k} | {len(mine)} | " + " | ".join(cells) + " |")
 
     import matplotlib
 
@@ -80,8 +96,9 @@ def main() -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 4))
-    ks = sorted({r["k"] for r in rows})
     ax.plot(ks, [rows[0]["start"]] * len(ks), "k--", label="start")
+    means = [mean_interval([r["final"] for r in by_k[k]])[0] for k in ks]
+    ax.plot(ks, means, "k-", linewidth=2, label="mean over seeds")
     for seed in sorted({r["seed"] for r in rows}):
         mine = [r for r in rows if r["seed"] == seed]
         ax.errorbar(
@@ -90,7 +107,7 @@ def main() -> None:
             yerr=[r["final_ci"] for r in mine],
             marker="o",
             capsize=3,
-            linestyle="-" if len(mine) > 1 else "none",
+            linestyle="none",
             label=f"seed {seed} (n={mine[0]['episodes']} episodes)",
         )
     ax.set_xticks(ks)

@@ -9,8 +9,9 @@
 # side by side) 53, 62 and 94 min; MPC 3-7 min per 100 episodes. Run from the repository root
 # with KINET_RL_YCB_DIR set:
 #
-#   bash docs/scripts/ycb_fig9b.sh            # K = 3, 6 and 12
-#   bash docs/scripts/ycb_fig9b.sh 3 12       # only these K
+#   bash docs/scripts/ycb_fig9b.sh                 # K = 3, 6 and 12, seed 0
+#   bash docs/scripts/ycb_fig9b.sh 3 12            # only these K
+#   SEEDS="1 2" bash docs/scripts/ycb_fig9b.sh 6   # other training seeds (run names end _seed1, ...)
 #
 # Resumable: the collection, training and evaluation each resume where they stopped.
 set -euo pipefail
@@ -24,11 +25,15 @@ if (($#)); then keypoints=("$@"); else keypoints=(3 6 12); fi
 mkdir -p runs
 running=0
 for k in "${keypoints[@]}"; do
-  run=("${side96[@]}" exp_name=ycb_sideview96_k$k keypoints=$k seed=0 trainer.seed=0)
-  { "$PYTHON" -m kinet_rl.train "${run[@]}" trainer.steps=8000
-    "$PYTHON" -m kinet_rl.evaluate "${run[@]}" "${mpc[@]}"
-  } > "runs/ycb_fig9b_k$k.log" 2>&1 &
-  running=$((running + 1))
-  if ((running == 2)); then wait -n || true; running=$((running - 1)); fi  # its log says how it ended
+  for s in ${SEEDS:-0}; do
+    name=ycb_sideview96_k$k
+    if ((s)); then name+=_seed$s; fi
+    run=("${side96[@]}" exp_name=$name keypoints=$k seed=$s trainer.seed=$s)
+    { "$PYTHON" -m kinet_rl.train "${run[@]}" trainer.steps=8000
+      "$PYTHON" -m kinet_rl.evaluate "${run[@]}" "${mpc[@]}"
+    } > "runs/$name.log" 2>&1 &
+    running=$((running + 1))
+    if ((running == 2)); then wait -n || true; running=$((running - 1)); fi  # its log says how it ended
+  done
 done
 wait
