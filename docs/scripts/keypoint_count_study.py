@@ -87,7 +87,9 @@ def main() -> None:
     print("| K | seeds | keypoint accuracy [%] | 1 push [mm] | 1 push, moved | MPC final [mm] |")
     print("|---:|---:|---:|---:|---:|---:|")
     for k, mine in by_k.items():
-        cells = [over_seeds([r[key] for r in mine]) for key in ("accuracy", "one", "one_moved", "final")]
+        cells = [
+            over_seeds([r[key] for r in mine]) for key in ("accuracy", "one", "one_moved", "final")
+        ]
         print(f"| {k} | {len(mine)} | " + " | ".join(cells) + " |")
 
     import matplotlib
