@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# YCBObjs at the cpu scale, side camera at 96 px (docs/results.md, "The ablations, V-CDN, IN-full
+# and the baselines' seeds on the side camera at 96 px"): the Table I rows that
+# ycb_side96_seeds_baselines.sh left out, on the same data (`ycb_side96_cpu`, 3 objects) and
+# planned with the same budget on the same 100 test episodes (seeds 50000-50099, T = 30, 64 x 3):
+# KINet-no-ctr, KINet-determ and V-CDN (8,000 steps, as KINet; V-CDN's first half trains its
+# perception), IN and IN-full on ground-truth state (the cpu scale's 10,000), then training seeds
+# 1 and 2 of every baseline (Forw, ForwInv, VisIN, IN, IN-full; 10,000 steps, as their seed 0).
+# Two chains at once, one torch thread and one MPC worker each, on 2 cores. Run from the
+# repository root with KINET_RL_YCB_DIR set:
+#
+#   bash docs/scripts/ycb_side96_ablations.sh        # both parts
+#   bash docs/scripts/ycb_side96_ablations.sh rows   # the new rows only (seed 0); `seeds`: the rest
+#
+# Resumable: training and evaluation each resume where they stopped.
+set -euo pipefail
+export OMP_NUM_THREADS=1 MUJOCO_GL="${MUJOCO_GL:-egl}"
+PYTHON="${PYTHON:-python}"
+mpc=(eval.episodes=100 eval.num_steps=30 "eval.geometries=[train]" "eval.backgrounds=[]"
+  eval.workers=1 eval.videos=0 "eval.num_objects=[]")
+row() {  # model, planning method, seed, extra training overrides: trained and planned
+  local name=ycb_sideview96_$1
+  [[ $3 == 0 ]] || name+=_seed$3
+  local run=(+exp=ycb_sideview_$1 +scale=cpu env.image_size=96 exp_name=$name
+    seed=$3 trainer.seed=$3)
+  "$PYTHON" -m kinet_rl.train "${run[@]}" "${@:4}"
+  "$PYTHON" -m kinet_rl.evaluate "${run[@]}" "${mpc[@]}" "eval.methods=[$2]"
+}
+rows() {
+  {
+    row vcdn model_mpc 0 trainer.steps=8000
+    row in model_mpc 0
+    row in_full model_mpc 0
+    row forwinv model_mpc 2
+  } > runs/ycb_side96_ablations_a.log 2>&1 &
+  {
+    row no_ctr kinet_keypoints_distance 0 trainer.steps=8000
+    row forwinv model_mpc 1
+    row determ kinet_keypoints_distance 0 trainer.steps=8000
+  } > runs/ycb_side96_ablations_b.log 2>&1 &
+  wait
+}
+seeds() {  # forwinv's seeds 1-2 ran in rows()
+  for seed in 1 2; do
+    for model in forw visin in in_full; do row $model model_mpc $seed; done \
+      > runs/ycb_side96_seeds_$seed.log 2>&1 &
+  done
+  wait
+}
+mkdir -p runs
+case "${1:-all}" in
+  rows) rows ;;
+  seeds) seeds ;;
+  all) rows; seeds ;;
+  *) echo "usage: $0 [rows|seeds|all]" >&2; exit 2 ;;
+esac
