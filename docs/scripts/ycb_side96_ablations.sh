@@ -5,7 +5,8 @@
 # planned with the same budget on the same 100 test episodes (seeds 50000-50099, T = 30, 64 x 3):
 # KINet-no-ctr, KINet-determ and V-CDN (8,000 steps, as KINet; V-CDN's first half trains its
 # perception), IN and IN-full on ground-truth state (the cpu scale's 10,000), then training seeds
-# 1 and 2 of every baseline (Forw, ForwInv, VisIN, IN, IN-full; 10,000 steps, as their seed 0).
+# 1 and 2 of every baseline (Forw, ForwInv, VisIN, IN, IN-full; 10,000 steps, as their seed 0)
+# and of KINet-no-ctr (8,000 steps, as its seed 0), cheapest first.
 # Two chains at once, one torch thread and one MPC worker each, on 2 cores. Run from the
 # repository root with KINET_RL_YCB_DIR set:
 #
@@ -40,14 +41,18 @@ rows() {
   } > runs/ycb_side96_ablations_b.log 2>&1 &
   wait
 }
-seeds() {  # forwinv's seeds 1-2 ran in rows()
+seeds() {  # forwinv's seeds 1-2 ran in rows(); one chain per seed
   for seed in 1 2; do
-    for model in forw visin in in_full; do row $model model_mpc $seed; done \
-      > runs/ycb_side96_seeds_$seed.log 2>&1 &
+    {
+      for model in in in_full visin forw; do row $model model_mpc $seed; done
+      row no_ctr kinet_keypoints_distance $seed trainer.steps=8000
+    } > runs/ycb_side96_seeds_$seed.log 2>&1 &
   done
   wait
 }
 mkdir -p runs
+# The data first, once (both chains read it; skipped when complete):
+"$PYTHON" -m kinet_rl.collect +exp=ycb_sideview +scale=cpu env.image_size=96
 case "${1:-all}" in
   rows) rows ;;
   seeds) seeds ;;
