@@ -59,3 +59,8 @@ timed background "$PYTHON" -m kinet_rl.evaluate \
 # KINet's other costs (embedding distance, the paper's S, Chamfer) at the first budget, last.
 "$PYTHON" docs/scripts/mpc_cpu.py test --runs $R --out runs/mpc_default/test_64x3 --episodes 100 \
   --planner '{"return_best": true}' --groups kinet
+# The same group at the second budget (not yet run: five methods, the keypoint-L2 row repeated, at
+# ~1,000 s each with 2 workers, estimated from that row's 1,005 s at 256 x 5).
+"$PYTHON" docs/scripts/mpc_cpu.py test --runs $R --out runs/mpc_default/test_256x5 --episodes 100 \
+  --planner '{"return_best": true, "num_candidates": 256, "optim_steps": 5, "top_k": 16}' \
+  --groups kinet
