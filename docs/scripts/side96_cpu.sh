@@ -1,12 +1,16 @@
 #!/usr/bin/env bash
 # Table I's side camera at 96 px (24x24 heatmaps), the default-scale study's fix for the side-camera
 # detector, at the cpu scale on one copy of the data: collect `tables_cpu_side96` (the cpu-scale
-# side-camera data rendered at 96 px), then KINet, IN and IN-full (seeds 0, 1, 2 each) on it, in
-# three chains of rows with one torch thread each (the three KINet seeds at once on 2 cores). Each row is
-# trained and scored by `python -m kinet_rl.tables`; its MPC stage is cut to 4 episodes (not
-# reported: the MPC tables are on the top camera). Run from the repository root:
+# side-camera data rendered at 96 px), then seeds 0, 1, 2 of the rows a part names, in three chains
+# of rows with one torch thread each (3 jobs on 2 cores). Each row is trained and scored by
+# `python -m kinet_rl.tables`; its MPC stage is cut to 4 episodes (not reported: the MPC tables are
+# on the top camera). Run from the repository root:
 #
-#   bash docs/scripts/side96_cpu.sh
+#   bash docs/scripts/side96_cpu.sh [part]
+#
+# Parts: `first` (the default; KINet, IN and IN-full, run in a session of 2026-12-03), `baselines`
+# (Forw, ForwInv, VisIN: ~10-20 min per row), `determ` and `no_ctr` (KINet-determ, KINet-no-ctr:
+# ~75-115 min per row with 3 at once), each a session's work on 2 cores.
 #
 # Resumable: the collection and every row resume where they stopped, a finished row is skipped.
 set -euo pipefail
@@ -23,7 +27,23 @@ common=(tables=cpu "tables.overrides=[${quoted%,}]" 'tables.generalization_model
 "$PYTHON" -m kinet_rl.collect +exp=blocks_sideview "${cpu_scale[@]/\{camera\}/side}"
 source "$(dirname "$0")/table_rows.sh"
 mkdir -p runs
-rows runs/side96_a kinet 0 > runs/side96_a.log 2>&1 &
-rows runs/side96_b kinet 1 in 0 in 1 in 2 > runs/side96_b.log 2>&1 &
-rows runs/side96_c kinet 2 in_full 0 in_full 1 in_full 2 > runs/side96_c.log 2>&1 &
+case "${1:-first}" in
+  first)
+    rows runs/side96_a kinet 0 > runs/side96_a.log 2>&1 &
+    rows runs/side96_b kinet 1 in 0 in 1 in 2 > runs/side96_b.log 2>&1 &
+    rows runs/side96_c kinet 2 in_full 0 in_full 1 in_full 2 > runs/side96_c.log 2>&1 &
+    ;;
+  baselines)
+    for seed in 0 1 2; do
+      rows runs/side96_base_$seed forw $seed forwinv $seed visin $seed \
+        > runs/side96_base_$seed.log 2>&1 &
+    done
+    ;;
+  determ | no_ctr)
+    for seed in 0 1 2; do
+      rows runs/side96_$1_$seed kinet_$1 $seed > runs/side96_$1_$seed.log 2>&1 &
+    done
+    ;;
+  *) echo "usage: $0 [first|baselines|determ|no_ctr]" >&2; exit 2 ;;
+esac
 wait

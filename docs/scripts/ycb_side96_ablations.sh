@@ -6,12 +6,15 @@
 # KINet-no-ctr, KINet-determ and V-CDN (8,000 steps, as KINet; V-CDN's first half trains its
 # perception), IN and IN-full on ground-truth state (the cpu scale's 10,000), then training seeds
 # 1 and 2 of every baseline (Forw, ForwInv, VisIN, IN, IN-full; 10,000 steps, as their seed 0)
-# and of KINet-no-ctr (8,000 steps, as its seed 0), cheapest first.
-# Two chains at once, one torch thread and one MPC worker each, on 2 cores. Run from the
+# and of KINet-no-ctr (8,000 steps, as its seed 0), cheapest first; then KINet-determ's three seeds
+# and V-CDN's seeds 1 and 2.
+# Two or three jobs at once, one torch thread and one MPC worker each, on 2 cores. Run from the
 # repository root with KINET_RL_YCB_DIR set:
 #
 #   bash docs/scripts/ycb_side96_ablations.sh        # both parts
-#   bash docs/scripts/ycb_side96_ablations.sh rows   # the new rows only (seed 0); `seeds`: the rest
+#   bash docs/scripts/ycb_side96_ablations.sh rows   # the new rows only (seed 0); `seeds`: the
+#                                                    # baselines' seeds 1-2; `determ`: KINet-determ's
+#                                                    # 3 seeds and V-CDN's seeds 1-2
 #
 # Resumable: training and evaluation each resume where they stopped.
 set -euo pipefail
@@ -37,7 +40,6 @@ rows() {
   {
     row no_ctr kinet_keypoints_distance 0 trainer.steps=8000
     row forwinv model_mpc 1
-    row determ kinet_keypoints_distance 0 trainer.steps=8000
   } > runs/ycb_side96_ablations_b.log 2>&1 &
   wait
 }
@@ -50,12 +52,24 @@ seeds() {  # forwinv's seeds 1-2 ran in rows(); one chain per seed
   done
   wait
 }
+determ() {  # KINet-determ's three seeds at once (3 jobs on 2 cores), then V-CDN's seeds 1-2
+  for seed in 0 1 2; do
+    row determ kinet_keypoints_distance $seed trainer.steps=8000 \
+      > runs/ycb_side96_determ_$seed.log 2>&1 &
+  done
+  wait
+  for seed in 1 2; do
+    row vcdn model_mpc $seed trainer.steps=8000 > runs/ycb_side96_vcdn_$seed.log 2>&1 &
+  done
+  wait
+}
 mkdir -p runs
 # The data first, once (both chains read it; skipped when complete):
 "$PYTHON" -m kinet_rl.collect +exp=ycb_sideview +scale=cpu env.image_size=96
 case "${1:-all}" in
   rows) rows ;;
   seeds) seeds ;;
-  all) rows; seeds ;;
-  *) echo "usage: $0 [rows|seeds|all]" >&2; exit 2 ;;
+  determ) determ ;;
+  all) rows; seeds; determ ;;
+  *) echo "usage: $0 [rows|seeds|determ|all]" >&2; exit 2 ;;
 esac
