@@ -3,15 +3,15 @@
 # and the baselines' seeds on the side camera at 96 px"): the Table I rows that
 # ycb_side96_seeds_baselines.sh left out, on the same data (`ycb_side96_cpu`, 3 objects) and
 # planned with the same budget on the same 100 test episodes (seeds 50000-50099, T = 30, 64 x 3):
-# KINet-no-ctr, KINet-determ and V-CDN (8,000 steps, as KINet; V-CDN's first half trains its
+# KINet-no-ctr and V-CDN (8,000 steps, as KINet; V-CDN's first half trains its
 # perception), IN and IN-full on ground-truth state (the cpu scale's 10,000), then training seeds
 # 1 and 2 of every baseline (Forw, ForwInv, VisIN, IN, IN-full; 10,000 steps, as their seed 0)
 # and of KINet-no-ctr (8,000 steps, as its seed 0), cheapest first; then KINet-determ's three seeds
-# and V-CDN's seeds 1 and 2.
+# (8,000 steps) and V-CDN's seeds 1 and 2.
 # Two or three jobs at once, one torch thread and one MPC worker each, on 2 cores. Run from the
 # repository root with KINET_RL_YCB_DIR set:
 #
-#   bash docs/scripts/ycb_side96_ablations.sh        # both parts
+#   bash docs/scripts/ycb_side96_ablations.sh        # every part
 #   bash docs/scripts/ycb_side96_ablations.sh rows   # the new rows only (seed 0); `seeds`: the
 #                                                    # baselines' seeds 1-2; `determ`: KINet-determ's
 #                                                    # 3 seeds and V-CDN's seeds 1-2
