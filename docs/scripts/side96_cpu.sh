@@ -9,9 +9,9 @@
 #   bash docs/scripts/side96_cpu.sh [part]
 #
 # Parts: `first` (the default; KINet, IN and IN-full, run in a session of 2026-12-03), `baselines`
-# (Forw, ForwInv, VisIN), `determ` and `no_ctr` (KINet-determ, KINet-no-ctr). Not yet run; estimated
-# from the measured rows (Forw/ForwInv/VisIN 6-20 min per row at 64 px, KINet 75-115 min per row at
-# 96 px beside 1-3 other jobs), each part is about a session's work on 2 cores.
+# (Forw, ForwInv, VisIN; run in a session of 2026-12-06: 1 h 30 min with the collection), `determ`
+# and `no_ctr` (KINet-determ, KINet-no-ctr; estimated from the KINet rows at 96 px, 75-115 min per
+# row beside 1-3 other jobs, each about a session's work on 2 cores).
 #
 # Resumable: the collection and every row resume where they stopped, a finished row is skipped.
 set -euo pipefail
