@@ -10,8 +10,8 @@
 #
 # Parts: `first` (the default; KINet, IN and IN-full, run in a session of 2026-12-03), `baselines`
 # (Forw, ForwInv, VisIN; run in a session of 2026-12-06: 1 h 30 min with the collection), `determ`
-# and `no_ctr` (KINet-determ, KINet-no-ctr; estimated from the KINet rows at 96 px, 75-115 min per
-# row beside 1-3 other jobs, each about a session's work on 2 cores).
+# and `no_ctr` (KINet-determ, KINet-no-ctr; measured for KINet-determ seeds 0-1 in that session:
+# 70 min per seed with two jobs on 2 cores, so 100-115 min with three; about a session per part).
 #
 # Resumable: the collection and every row resume where they stopped, a finished row is skipped.
 set -euo pipefail
