@@ -11,7 +11,9 @@
 # Parts: `first` (the default; KINet, IN and IN-full, run in a session of 2026-12-03), `baselines`
 # (Forw, ForwInv, VisIN; run in a session of 2026-12-06: 1 h 30 min with the collection), `determ`
 # and `no_ctr` (KINet-determ, KINet-no-ctr; measured for KINet-determ seeds 0-1 in that session:
-# 70 min per seed with two jobs on 2 cores, so 100-115 min with three; about a session per part).
+# 70 min per seed with two jobs on 2 cores, so 100-115 min with three; about a session per part),
+# `ablations` (what a session of 2026-12-06 ran after KINet-determ seeds 0-1: KINet-determ seed 2
+# and KINet-no-ctr seeds 0-2 in two chains of two rows, one per core, so each row gets a core).
 #
 # Resumable: the collection and every row resume where they stopped, a finished row is skipped.
 set -euo pipefail
@@ -45,6 +47,10 @@ case "${1:-first}" in
       rows runs/side96_$1_$seed kinet_$1 $seed > runs/side96_$1_$seed.log 2>&1 &
     done
     ;;
-  *) echo "usage: $0 [first|baselines|determ|no_ctr]" >&2; exit 2 ;;
+  ablations)
+    rows runs/side96_ablations_a kinet_determ 2 kinet_no_ctr 1 > runs/side96_ablations_a.log 2>&1 &
+    rows runs/side96_ablations_b kinet_no_ctr 0 kinet_no_ctr 2 > runs/side96_ablations_b.log 2>&1 &
+    ;;
+  *) echo "usage: $0 [first|baselines|determ|no_ctr|ablations]" >&2; exit 2 ;;
 esac
 wait
