@@ -20,16 +20,8 @@
 set -euo pipefail
 export OMP_NUM_THREADS=1 MUJOCO_GL="${MUJOCO_GL:-egl}"
 PYTHON="${PYTHON:-python}"
-mpc=(eval.episodes=100 eval.num_steps=30 "eval.geometries=[train]" "eval.backgrounds=[]"
-  eval.workers=1 eval.videos=0 "eval.num_objects=[]")
-row() {  # model, planning method, seed, extra training overrides: trained and planned
-  local name=ycb_sideview96_$1
-  [[ $3 == 0 ]] || name+=_seed$3
-  local run=(+exp=ycb_sideview_$1 +scale=cpu env.image_size=96 exp_name=$name
-    seed=$3 trainer.seed=$3)
-  "$PYTHON" -m kinet_rl.train "${run[@]}" "${@:4}"
-  "$PYTHON" -m kinet_rl.evaluate "${run[@]}" "${mpc[@]}" "eval.methods=[$2]"
-}
+source "$(dirname "$0")/ycb_rows.sh"
+row() { ycb_row side 96 "$@"; }  # model, planning method, seed, extra training overrides
 rows() {
   {
     row vcdn model_mpc 0 trainer.steps=8000
