@@ -11,21 +11,26 @@
 #
 #   bash docs/scripts/ycb_top96_cpu.sh [part]
 #
-# Parts, each about a session on 2 cores (from the side camera's 77 min per KINet seed with two
-# jobs at once): `first` (KINet's 3 seeds, one job each, and IN and IN-full after seed 0), `determ`
+# Parts, each estimated at about a session on 2 cores (not measured: from the side camera's 77 min
+# per KINet seed at 96 px with two jobs at once): `first` (KINet's 3 seeds, one job each, and IN and IN-full after seed 0), `determ`
 # and `no_ctr` (3 seeds each, one job per seed), `baselines` (Forw, ForwInv, VisIN and V-CDN, one
 # chain per seed).
 #
-# Resumable: the collection and every row resume where they stopped, a finished step is skipped.
+# Resumable: the collection, training and evaluation each resume where they stopped.
 set -euo pipefail
 export OMP_NUM_THREADS=1 MUJOCO_GL="${MUJOCO_GL:-egl}"
 PYTHON="${PYTHON:-python}"
 source "$(dirname "$0")/ycb_rows.sh"
 row() { ycb_row top 96 "$@"; }
 keypoints=kinet_keypoints_distance
+part=${1:-first}
+case "$part" in
+  first | determ | no_ctr | baselines) ;;
+  *) echo "usage: $0 [first|determ|no_ctr|baselines]" >&2; exit 2 ;;
+esac
 "$PYTHON" -m kinet_rl.collect +exp=ycb_topview +scale=cpu env.image_size=96
 mkdir -p runs
-case "${1:-first}" in
+case "$part" in
   first)
     {
       row kinet $keypoints 0 trainer.steps=8000
@@ -37,7 +42,7 @@ case "${1:-first}" in
     ;;
   determ | no_ctr)
     for seed in 0 1 2; do
-      row "$1" $keypoints $seed trainer.steps=8000 > "runs/ycb_top96_$1_$seed.log" 2>&1 &
+      row "$part" $keypoints $seed trainer.steps=8000 > "runs/ycb_top96_${part}_$seed.log" 2>&1 &
     done
     ;;
   baselines)
@@ -48,6 +53,5 @@ case "${1:-first}" in
       } > runs/ycb_top96_baselines_$seed.log 2>&1 &
     done
     ;;
-  *) echo "usage: $0 [first|determ|no_ctr|baselines]" >&2; exit 2 ;;
 esac
 wait
