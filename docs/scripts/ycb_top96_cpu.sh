@@ -12,9 +12,9 @@
 #   bash docs/scripts/ycb_top96_cpu.sh [part]
 #
 # Parts, each estimated at about a session on 2 cores (not measured: from the side camera's 77 min
-# per KINet seed at 96 px with two jobs at once): `first` (KINet's 3 seeds, one job each, and IN and IN-full after seed 0), `determ`
-# and `no_ctr` (3 seeds each, one job per seed), `baselines` (Forw, ForwInv, VisIN and V-CDN, one
-# chain per seed).
+# per KINet seed at 96 px with two jobs at once): `first` (KINet's 3 seeds, one job each, then
+# IN's 3 seeds after KINet's seed 0 and IN-full's after seed 1), `determ` and `no_ctr` (3 seeds
+# each, one job per seed), `baselines` (Forw, ForwInv, VisIN and V-CDN, one chain per seed).
 #
 # Resumable: the collection, training and evaluation each resume where they stopped.
 set -euo pipefail
@@ -34,11 +34,13 @@ case "$part" in
   first)
     {
       row kinet $keypoints 0 trainer.steps=8000
-      for seed in 0 1 2; do row in model_mpc $seed; row in_full model_mpc $seed; done
+      for seed in 0 1 2; do row in model_mpc $seed; done
     } > runs/ycb_top96_first_0.log 2>&1 &
-    for seed in 1 2; do
-      row kinet $keypoints $seed trainer.steps=8000 > runs/ycb_top96_first_$seed.log 2>&1 &
-    done
+    {
+      row kinet $keypoints 1 trainer.steps=8000
+      for seed in 0 1 2; do row in_full model_mpc $seed; done
+    } > runs/ycb_top96_first_1.log 2>&1 &
+    row kinet $keypoints 2 trainer.steps=8000 > runs/ycb_top96_first_2.log 2>&1 &
     ;;
   determ | no_ctr)
     for seed in 0 1 2; do
