@@ -6,54 +6,43 @@
 # sequences and 100 test episodes for every row): KINet, KINet-determ, KINet-no-ctr and V-CDN
 # for 8,000 steps (as on the side camera at 96 px), the others for the cpu scale's 10,000; KINet
 # and its ablations plan with `kinet_keypoints_distance` (the YCB experiments' validated cost),
-# the others with `model_mpc`. One torch thread and one MPC worker per job, on 2 cores. Run from
-# the repository root with KINET_RL_YCB_DIR set:
+# the others with `model_mpc`. Run from the repository root with KINET_RL_YCB_DIR set:
 #
-#   bash docs/scripts/ycb_top96_cpu.sh [part]
+#   bash docs/scripts/ycb_top96_cpu.sh
 #
-# Parts, each estimated at about a session on 2 cores (not measured: from the side camera's 77 min
-# per KINet seed at 96 px with two jobs at once): `first` (KINet's 3 seeds, one job each, then
-# IN's 3 seeds after KINet's seed 0 and IN-full's after seed 1), `determ` and `no_ctr` (3 seeds
-# each, one job per seed), `baselines` (Forw, ForwInv, VisIN and V-CDN, one chain per seed).
-#
-# Resumable: the collection, training and evaluation each resume where they stopped.
+# Two chains, one torch thread and one MPC worker each (2 cores; three jobs at once measured no
+# faster on the side camera), take the rows below in order, each the next row no chain has taken.
+# The whole table is ~15 core-hours (the side camera's row times: ~80 min per KINet-sized row),
+# more than one session: stop it at any time (Ctrl-C, or the session ends) and run it again, one
+# copy at a time: finished rows are skipped and a stopped row resumes where it stopped.
 set -euo pipefail
 export OMP_NUM_THREADS=1 MUJOCO_GL="${MUJOCO_GL:-egl}"
 PYTHON="${PYTHON:-python}"
 source "$(dirname "$0")/ycb_rows.sh"
-row() { ycb_row top 96 "$@"; }
 keypoints=kinet_keypoints_distance
-part=${1:-first}
-case "$part" in
-  first | determ | no_ctr | baselines) ;;
-  *) echo "usage: $0 [first|determ|no_ctr|baselines]" >&2; exit 2 ;;
-esac
+long=trainer.steps=8000
+rows=()  # <model> <method> <seed> [training overrides]
+for seed in 0 1 2; do rows+=("kinet $keypoints $seed $long"); done
+for seed in 0 1 2; do rows+=("in model_mpc $seed" "in_full model_mpc $seed"); done
+for model in determ no_ctr; do
+  for seed in 0 1 2; do rows+=("$model $keypoints $seed $long"); done
+done
+for seed in 0 1 2; do
+  rows+=("vcdn model_mpc $seed $long" "forw model_mpc $seed" "forwinv model_mpc $seed"
+    "visin model_mpc $seed")
+done
 "$PYTHON" -m kinet_rl.collect +exp=ycb_topview +scale=cpu env.image_size=96
-mkdir -p runs
-case "$part" in
-  first)
-    {
-      row kinet $keypoints 0 trainer.steps=8000
-      for seed in 0 1 2; do row in model_mpc $seed; done
-    } > runs/ycb_top96_first_0.log 2>&1 &
-    {
-      row kinet $keypoints 1 trainer.steps=8000
-      for seed in 0 1 2; do row in_full model_mpc $seed; done
-    } > runs/ycb_top96_first_1.log 2>&1 &
-    row kinet $keypoints 2 trainer.steps=8000 > runs/ycb_top96_first_2.log 2>&1 &
-    ;;
-  determ | no_ctr)
-    for seed in 0 1 2; do
-      row "$part" $keypoints $seed trainer.steps=8000 > "runs/ycb_top96_${part}_$seed.log" 2>&1 &
-    done
-    ;;
-  baselines)
-    for seed in 0 1 2; do
-      {
-        for model in visin forw forwinv; do row $model model_mpc $seed; done
-        row vcdn model_mpc $seed trainer.steps=8000
-      } > runs/ycb_top96_baselines_$seed.log 2>&1 &
-    done
-    ;;
-esac
+claims=runs/ycb_top96_claims  # a row is taken by the chain that creates its folder here
+rm -rf "$claims"
+mkdir -p "$claims"
+chain() {
+  local i
+  for i in "${!rows[@]}"; do
+    if mkdir "$claims/$i" 2> /dev/null; then
+      # shellcheck disable=SC2086  # a row is words
+      ycb_row top 96 ${rows[i]}
+    fi
+  done
+}
+for c in 0 1; do chain > "runs/ycb_top96_chain_$c.log" 2>&1 & done
 wait
