@@ -1,9 +1,10 @@
 """YCBObjs' Table I of one camera at 96 px (docs/results.md) from the JSON under docs/runs.
 
 Every row of a camera was trained on the same data (`ycb_side96_cpu` or `ycb_top96_cpu`), scored
-on the same 256 test sequences and planned on the same 100 test episodes. A row with several training seeds shows the mean ± the
-half-width of the Student-t 95% interval over seeds (``kinet_rl.stats.mean_interval``); a row with
-one seed shows its value, and its MPC `±` (marked *) is over the 100 episodes.
+on the same 256 test sequences and planned on the same 100 test episodes. A row with several
+training seeds shows the mean ± the half-width of the Student-t 95% interval over seeds
+(``kinet_rl.stats.mean_interval``); a row with one seed shows its value, and its MPC `±` (marked
+*) is over the 100 episodes.
 
 Usage: python docs/scripts/ycb_table_i.py side|top
 """
