@@ -24,12 +24,13 @@ long=trainer.steps=8000
 rows=()  # <model> <method> <seed> [training overrides]
 for seed in 0 1 2; do rows+=("kinet $keypoints $seed $long"); done
 for seed in 0 1 2; do rows+=("in model_mpc $seed" "in_full model_mpc $seed"); done
+# the baselines before the ablations: a session finishes whole rows of the cheap ones
+for seed in 0 1 2; do
+  rows+=("forw model_mpc $seed" "forwinv model_mpc $seed" "visin model_mpc $seed")
+done
+for seed in 0 1 2; do rows+=("vcdn model_mpc $seed $long"); done
 for model in determ no_ctr; do
   for seed in 0 1 2; do rows+=("$model $keypoints $seed $long"); done
-done
-for seed in 0 1 2; do
-  rows+=("vcdn model_mpc $seed $long" "forw model_mpc $seed" "forwinv model_mpc $seed"
-    "visin model_mpc $seed")
 done
 "$PYTHON" -m kinet_rl.collect +exp=ycb_topview +scale=cpu env.image_size=96
 claims=runs/ycb_top96_claims  # a row is taken by the chain that creates its folder here
