@@ -8,8 +8,9 @@
 #
 #   bash docs/scripts/ycb_side128_cpu.sh
 #
-# ~4 core-hours on a 2-core machine (the 96 px row's times, x1.8 for the pixels): stop it at any
-# time and run it again; collection, training and evaluation each resume where they stopped.
+# ~3.5 core-hours on a 2-core machine (measured: collection 45 min with 2 workers, training ~0.9 s
+# per step on one core beside another job, MPC not yet): stop it at any time and run it again;
+# collection, training and evaluation each resume where they stopped.
 set -euo pipefail
 export OMP_NUM_THREADS=1 MUJOCO_GL="${MUJOCO_GL:-egl}"
 PYTHON="${PYTHON:-python}"
