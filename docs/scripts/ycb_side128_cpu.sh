@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The YCB image-size study's third size: KINet on the side camera at 128 px (32x32 heatmaps),
 # cpu scale, beside the 64 and 96 px runs of docs/results.md ("The side camera at 96 px (the
-# image-size study: 64 vs 96 px)"). Collects `ycb_side128_cpu` (the same 1,250 episodes as the
-# 64 and 96 px copies, rendered at 128 px), then trains KINet seed 0 for 8,000 steps as at 96 px
+# image-size study: 64 vs 96 px)"). Collects `ycb_side128_cpu` (the 96 px copy's 1,250 episodes,
+# positions and pushes identical to the byte, rendered at 128 px), then trains KINet seed 0 for 8,000 steps as at 96 px
 # and plans it on the YCB MPC protocol's 100 test episodes with `kinet_keypoints_distance`
 # (`ycb_row`, docs/scripts/ycb_rows.sh). Run from the repository root with KINET_RL_YCB_DIR set:
 #
