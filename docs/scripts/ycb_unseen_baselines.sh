@@ -28,16 +28,16 @@ unseen() {
 baselines() {
   local model
   for model in forw forwinv visin; do
-    "$PYTHON" -m kinet_rl.train +exp=ycb_topview_$model +scale=cpu
+    "$PYTHON" -m kinet_rl.train +exp=ycb_topview_$model +scale=cpu env.image_size=64
   done
-  "$PYTHON" -m kinet_rl.train +exp=ycb_topview_vcdn +scale=cpu trainer.steps=8000
+  "$PYTHON" -m kinet_rl.train +exp=ycb_topview_vcdn +scale=cpu env.image_size=64 trainer.steps=8000
   for model in forw forwinv vcdn; do
-    "$PYTHON" -m kinet_rl.evaluate +exp=ycb_topview_$model +scale=cpu "${mpc[@]}" eval.videos=0 \
+    "$PYTHON" -m kinet_rl.evaluate +exp=ycb_topview_$model +scale=cpu env.image_size=64 "${mpc[@]}" eval.videos=0 \
       "eval.methods=[model_mpc]" "eval.num_objects=[]"
   done
 }
 mkdir -p runs
-"$PYTHON" -m kinet_rl.train +exp=ycb_topview_determ +scale=cpu trainer.steps=8000 \
+"$PYTHON" -m kinet_rl.train +exp=ycb_topview_determ +scale=cpu env.image_size=64 trainer.steps=8000 \
   > runs/ycb_determ.log 2>&1 &
 unseen > runs/ycb_unseen.log 2>&1 &
 baselines > runs/ycb_baselines.log 2>&1 &
