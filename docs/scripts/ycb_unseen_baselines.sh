@@ -26,19 +26,19 @@ unseen() {
     checkpoint=runs/ycb_topview_unseen_cpu/kinet.pt hydra.run.dir=runs/ycb_topview_unseen_cpu_heldout
 }
 baselines() {
-  local model
+  local model top=(+scale=cpu env.image_size=64)  # the YCB size before the image-size study
   for model in forw forwinv visin; do
-    "$PYTHON" -m kinet_rl.train +exp=ycb_topview_$model +scale=cpu env.image_size=64
+    "$PYTHON" -m kinet_rl.train +exp=ycb_topview_$model "${top[@]}"
   done
-  "$PYTHON" -m kinet_rl.train +exp=ycb_topview_vcdn +scale=cpu env.image_size=64 trainer.steps=8000
+  "$PYTHON" -m kinet_rl.train +exp=ycb_topview_vcdn "${top[@]}" trainer.steps=8000
   for model in forw forwinv vcdn; do
-    "$PYTHON" -m kinet_rl.evaluate +exp=ycb_topview_$model +scale=cpu env.image_size=64 "${mpc[@]}" eval.videos=0 \
+    "$PYTHON" -m kinet_rl.evaluate +exp=ycb_topview_$model "${top[@]}" "${mpc[@]}" eval.videos=0 \
       "eval.methods=[model_mpc]" "eval.num_objects=[]"
   done
 }
 mkdir -p runs
-"$PYTHON" -m kinet_rl.train +exp=ycb_topview_determ +scale=cpu env.image_size=64 trainer.steps=8000 \
-  > runs/ycb_determ.log 2>&1 &
+"$PYTHON" -m kinet_rl.train +exp=ycb_topview_determ +scale=cpu env.image_size=64 \
+  trainer.steps=8000 > runs/ycb_determ.log 2>&1 &
 unseen > runs/ycb_unseen.log 2>&1 &
 baselines > runs/ycb_baselines.log 2>&1 &
 wait
