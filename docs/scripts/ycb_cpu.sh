@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # YCBObjs at the cpu scale beyond the first side-camera run (docs/results.md, "YCBObjs at the cpu
 # scale"): the top camera at 64 px (KINet and IN) and the side camera at 96 px (KINet: the
-# image-size study against the 64 px run), each trained and scored by `python -m kinet_rl.train`, then
-# planned with the same budget on the same 100 test episodes (T = 30) by `kinet_rl.evaluate`.
+# image-size study against the 64 px run), each trained and scored by `python -m
+# kinet_rl.train`, then planned with the same budget on the same 100 test episodes (T = 30) by
+# `kinet_rl.evaluate`.
 # 8,000 training steps for KINet (the cpu scale's 10,000 did not fit the session that ran
 # this; KINet's training has no schedule tied to the step count, so a run stopped at 8,000 is
 # this run); IN the cpu scale's 10,000. Two chains at once, one torch thread each, on 2 cores.

@@ -14,6 +14,7 @@
 set -euo pipefail
 export OMP_NUM_THREADS=1 MUJOCO_GL="${MUJOCO_GL:-egl}"
 PYTHON="${PYTHON:-python}"
+top=(+scale=cpu env.image_size=64)  # the top camera's run: the YCB size before the image-size study
 mpc=(eval.episodes=100 eval.num_steps=30 "eval.geometries=[train]" "eval.backgrounds=[]"
   eval.workers=2)
 unseen() {
@@ -26,7 +27,7 @@ unseen() {
     checkpoint=runs/ycb_topview_unseen_cpu/kinet.pt hydra.run.dir=runs/ycb_topview_unseen_cpu_heldout
 }
 baselines() {
-  local model top=(+scale=cpu env.image_size=64)  # the YCB size before the image-size study
+  local model
   for model in forw forwinv visin; do
     "$PYTHON" -m kinet_rl.train +exp=ycb_topview_$model "${top[@]}"
   done
@@ -37,8 +38,8 @@ baselines() {
   done
 }
 mkdir -p runs
-"$PYTHON" -m kinet_rl.train +exp=ycb_topview_determ +scale=cpu env.image_size=64 \
-  trainer.steps=8000 > runs/ycb_determ.log 2>&1 &
+"$PYTHON" -m kinet_rl.train +exp=ycb_topview_determ "${top[@]}" trainer.steps=8000 \
+  > runs/ycb_determ.log 2>&1 &
 unseen > runs/ycb_unseen.log 2>&1 &
 baselines > runs/ycb_baselines.log 2>&1 &
 wait
