@@ -6,6 +6,7 @@
 # cell) and the random-texture model's evaluation. Run from the repository root:
 #
 #   bash docs/scripts/default_rows.sh
+#   bash docs/scripts/default_rows.sh costs   # only the default KINet and its cost groups (the end)
 #
 # Everything lands in runs/default_rows (models), runs/mpc_default (MPC JSON per row),
 # runs/table2_default and runs/background_default (evaluations). Every step is skipped when its
@@ -18,6 +19,7 @@ R=runs/default_rows
 DEFAULT_SCALE=(data.name=blocks_top64 data.num_episodes=100 data.num_workers=2
   data.chunk_episodes=16 data.generalization=null trainer.steps=1500 trainer.batch_size=32
   trainer.log_every=25 trainer.eval_every=250 trainer.checkpoint_every=250)
+BUDGET_256X5='{"return_best": true, "num_candidates": 256, "optim_steps": 5, "top_k": 16}'
 NO_MPC=(report.rearrangement_episodes=0 estimate=false)
 TABLE2=('eval.methods=[kinet_keypoints_l2]' eval.episodes=2 eval.generalization_episodes=20
   'eval.num_objects=[1,2,3,4,5]' 'eval.geometries=[train,gen]' 'eval.backgrounds=[random]'
@@ -34,33 +36,33 @@ timed() {  # timed <name> <command...>: runs the command unless runs/default_tim
 }
 
 timed kinet "$PYTHON" -m kinet_rl.train "${NO_MPC[@]}" hydra.run.dir=$R/blocks_topview
-for model in in forw forwinv; do
-  timed $model "$PYTHON" -m kinet_rl.train +exp=blocks_topview_$model "${DEFAULT_SCALE[@]}" \
-    "${NO_MPC[@]}" hydra.run.dir=$R/blocks_topview_$model
-done
-# The headline MPC table at two budgets: KINet's chosen cost, IN, Forw, ForwInv (random pushes and
-# the oracle need no model: their rows are the cpu-scale ones, on the same test episodes).
-"$PYTHON" docs/scripts/mpc_cpu.py test --runs $R --out runs/mpc_default/test_64x3 --episodes 100 \
-  --planner '{"return_best": true}' --groups kinet_l2 in forw forwinv
-"$PYTHON" docs/scripts/mpc_cpu.py test --runs $R --out runs/mpc_default/test_256x5 --episodes 100 \
-  --planner '{"return_best": true, "num_candidates": 256, "optim_steps": 5, "top_k": 16}' \
-  --groups kinet_l2 in forw forwinv
-timed table2 "$PYTHON" -m kinet_rl.evaluate checkpoint=$R/blocks_topview/kinet.pt "${TABLE2[@]}" \
-  hydra.run.dir=runs/table2_default
-timed kinet_random "$PYTHON" -m kinet_rl.train "${NO_MPC[@]}" env.background=random \
-  data.name=blocks_top64_random exp_name=default_random_background \
-  hydra.run.dir=$R/blocks_topview_random_background
-# Trained on random textures: tested on the fixed background (the comparison, 20 episodes) and on
-# random textures (the background cell, 20 episodes: the same scenes as Table II's background cell).
-timed background "$PYTHON" -m kinet_rl.evaluate \
-  checkpoint=$R/blocks_topview_random_background/kinet.pt 'eval.methods=[kinet_keypoints_l2]' \
-  eval.episodes=20 eval.generalization_episodes=20 'eval.num_objects=[]' \
-  'eval.backgrounds=[random]' eval.workers=2 eval.videos=0 hydra.run.dir=runs/background_default
+if [[ ${1:-all} != costs ]]; then  # the baselines, the headline table, Table II, background
+  for model in in forw forwinv; do
+    timed $model "$PYTHON" -m kinet_rl.train +exp=blocks_topview_$model "${DEFAULT_SCALE[@]}" \
+      "${NO_MPC[@]}" hydra.run.dir=$R/blocks_topview_$model
+  done
+  # The headline MPC table at two budgets: KINet's chosen cost, IN, Forw, ForwInv (random pushes and
+  # the oracle need no model: their rows are the cpu-scale ones, on the same test episodes).
+  "$PYTHON" docs/scripts/mpc_cpu.py test --runs $R --out runs/mpc_default/test_64x3 --episodes 100 \
+    --planner '{"return_best": true}' --groups kinet_l2 in forw forwinv
+  "$PYTHON" docs/scripts/mpc_cpu.py test --runs $R --out runs/mpc_default/test_256x5 \
+    --episodes 100 --planner "$BUDGET_256X5" --groups kinet_l2 in forw forwinv
+  timed table2 "$PYTHON" -m kinet_rl.evaluate checkpoint=$R/blocks_topview/kinet.pt "${TABLE2[@]}" \
+    hydra.run.dir=runs/table2_default
+  timed kinet_random "$PYTHON" -m kinet_rl.train "${NO_MPC[@]}" env.background=random \
+    data.name=blocks_top64_random exp_name=default_random_background \
+    hydra.run.dir=$R/blocks_topview_random_background
+  # Trained on random textures: tested on the fixed background (the comparison, 20 episodes) and
+  # on random textures (the background cell, 20 episodes: Table II's background cell's scenes).
+  timed background "$PYTHON" -m kinet_rl.evaluate \
+    checkpoint=$R/blocks_topview_random_background/kinet.pt 'eval.methods=[kinet_keypoints_l2]' \
+    eval.episodes=20 eval.generalization_episodes=20 'eval.num_objects=[]' \
+    'eval.backgrounds=[random]' eval.workers=2 eval.videos=0 hydra.run.dir=runs/background_default
+fi
 # KINet's other costs (embedding distance, the paper's S, Chamfer) at the first budget, last.
 "$PYTHON" docs/scripts/mpc_cpu.py test --runs $R --out runs/mpc_default/test_64x3 --episodes 100 \
   --planner '{"return_best": true}' --groups kinet
 # The same group at the second budget (not yet run: five methods, the keypoint-L2 row repeated, at
 # ~1,000 s each with 2 workers, estimated from that row's 1,005 s at 256 x 5).
 "$PYTHON" docs/scripts/mpc_cpu.py test --runs $R --out runs/mpc_default/test_256x5 --episodes 100 \
-  --planner '{"return_best": true, "num_candidates": 256, "optim_steps": 5, "top_k": 16}' \
-  --groups kinet
+  --planner "$BUDGET_256X5" --groups kinet
