@@ -11,8 +11,9 @@ rows into ``--runs`` (default ``runs/tables_cpu``)::
         --groups kinet_l2 in refs
 
 Each group is one :func:`kinet_rl.pipeline.evaluate_rearrangement` (3 blocks, top camera, 64 px,
-T = 40, 2 workers) written to ``<out>/<group>.json`` with its wall time and planner; a group whose
-JSON exists is skipped, so an interrupted run resumes.
+T = 40, ``--workers`` worker processes, default 2) written to ``<out>/<group>.json`` with its wall
+time and planner; a group whose JSON exists is skipped, so an interrupted run resumes (episode by
+episode on the same machine).
 """
 
 from __future__ import annotations
@@ -67,12 +68,14 @@ TEST = [
 ]
 
 
-def run_group(out: Path, name: str, methods, model, planner, split: str, episodes: int) -> None:
+def run_group(
+    out: Path, name: str, methods, model, planner, split: str, episodes: int, workers: int
+) -> None:
     """One evaluation into ``<out>/<name>.json`` (skipped when the file exists)."""
     path = out / f"{name}.json"
     if path.exists():
         return
-    eval_cfg = {"episodes": episodes, "methods": methods, "num_steps": 40, "workers": 2}
+    eval_cfg = {"episodes": episodes, "methods": methods, "num_steps": 40, "workers": workers}
     eval_cfg |= {"videos": 0, "split": split, "planner": planner}
     settings = RearrangementSettings.from_dicts(eval_cfg, SCENE)
     start = time.time()
@@ -95,6 +98,7 @@ def main() -> None:
     parser.add_argument("--runs", type=Path, default=Path("runs/tables_cpu"))
     parser.add_argument("--planner", default="{}", help="test: JSON overrides of BASE_PLANNER")
     parser.add_argument("--groups", nargs="+", help="only these groups")
+    parser.add_argument("--workers", type=int, default=2, help="episode worker processes")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
 
@@ -111,7 +115,9 @@ def main() -> None:
         groups = [(n, m, r, planner) for n, m, r in TEST]
     for name, methods, row, planner in groups:
         if args.groups is None or name in args.groups:
-            run_group(args.out, name, methods, load(row), planner, args.split, args.episodes)
+            run_group(
+                args.out, name, methods, load(row), planner, args.split, args.episodes, args.workers
+            )
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -101,9 +102,13 @@ def test_stored_episodes_round_trip_and_belong_to_one_model_and_settings(
             np.asarray(getattr(loaded, name)), np.asarray(getattr(result, name))
         )
     other_weights = EpisodeStore(tmp_path, settings, tiny_kinet(1))
-    other_settings = EpisodeStore(tmp_path, RearrangementSettings(episodes=3), tiny_kinet(0))
+    other_budget = replace(settings, planner={**settings.planner, "num_candidates": 8})
+    other_settings = EpisodeStore(tmp_path, other_budget, tiny_kinet(0))
     assert other_weights.load("comparison/kinet_graph/seed10001") is None
     assert other_settings.load("comparison/kinet_graph/seed10001") is None
+    # More episodes, other methods or another worker count run the same episodes: reused.
+    more = replace(settings, episodes=100, methods=("kinet_graph",), workers=1, num_objects=(2,))
+    assert EpisodeStore(tmp_path, more, tiny_kinet(0)).load("comparison/kinet_graph/seed10001")
 
 
 def test_batches_keep_the_order_and_never_mix_conditions_or_methods() -> None:

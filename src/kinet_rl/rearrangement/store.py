@@ -2,10 +2,10 @@
 
 Each finished episode is written atomically to ``<dir>/<fingerprint>/<name>.npz`` (the runner
 names episodes ``<condition>/<method>/seed<seed>``); the fingerprint hashes the evaluation
-settings and the model (class, config and weights), so episodes of another model or other
-settings are never reused. Rerunning the same evaluation loads the stored episodes and runs only
-the missing ones (each episode depends only on its seed: the results are those of an
-uninterrupted run).
+settings that shape an episode and the model (class, config and weights), so episodes of another
+model or other settings are never reused. Rerunning the evaluation loads the stored episodes and
+runs only the missing ones (each episode depends only on its seed: the results are those of an
+uninterrupted run), also with more episodes, other methods or cells, or another worker count.
 """
 
 from __future__ import annotations
@@ -28,9 +28,23 @@ from kinet_rl.rearrangement.settings import RearrangementSettings
 logger = logging.getLogger(__name__)
 
 
+# Settings that choose which episodes run, or where, but not what one episode does: left out of
+# the fingerprint so that a rerun with more episodes or workers reuses the finished ones.
+SELECTION_SETTINGS = (
+    "episodes",
+    "methods",
+    "num_objects",
+    "geometries",
+    "backgrounds",
+    "generalization_episodes",
+    "workers",
+)
+
+
 def fingerprint(settings: RearrangementSettings, model: torch.nn.Module | None) -> str:
-    """A short hash of the settings and of the model's class, config and weights."""
-    digest = hashlib.sha256(json.dumps(settings.as_dict(), sort_keys=True).encode())
+    """A short hash of the episode-shaping settings and of the model's class, config and weights."""
+    shaping = {k: v for k, v in settings.as_dict().items() if k not in SELECTION_SETTINGS}
+    digest = hashlib.sha256(json.dumps(shaping, sort_keys=True).encode())
     if model is not None:
         config = getattr(model, "config", {})
         digest.update(f"{type(model).__qualname__}{json.dumps(config, sort_keys=True)}".encode())
