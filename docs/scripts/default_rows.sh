@@ -62,7 +62,7 @@ fi
 # KINet's other costs (embedding distance, the paper's S, Chamfer) at the first budget, last.
 "$PYTHON" docs/scripts/mpc_cpu.py test --runs $R --out runs/mpc_default/test_64x3 --episodes 100 \
   --planner '{"return_best": true}' --groups kinet
-# The same group at the second budget (not yet run: five methods, the keypoint-L2 row repeated, at
-# ~1,000 s each with 2 workers, estimated from that row's 1,005 s at 256 x 5).
+# The same group at the second budget (five methods, the keypoint-L2 row repeated; ~32 min for the
+# third draw's on an Intel Xeon, docs/results.md "A third draw of the default model").
 "$PYTHON" docs/scripts/mpc_cpu.py test --runs $R --out runs/mpc_default/test_256x5 --episodes 100 \
   --planner "$BUDGET_256X5" --groups kinet
