@@ -62,7 +62,7 @@ fi
 # KINet's other costs (embedding distance, the paper's S, Chamfer) at the first budget, last.
 "$PYTHON" docs/scripts/mpc_cpu.py test --runs $R --out runs/mpc_default/test_64x3 --episodes 100 \
   --planner '{"return_best": true}' --groups kinet
-# The same group at the second budget (five methods, the keypoint-L2 row repeated; ~32 min for the
-# third draw's on an Intel Xeon, docs/results.md "A third draw of the default model").
+# The same group at the second budget (five methods, the keypoint-L2 row repeated; run for the
+# third draw in three resumed invocations, docs/results.md "A third draw of the default model").
 "$PYTHON" docs/scripts/mpc_cpu.py test --runs $R --out runs/mpc_default/test_256x5 --episodes 100 \
   --planner "$BUDGET_256X5" --groups kinet
