@@ -13,7 +13,7 @@ rows into ``--runs`` (default ``runs/tables_cpu``)::
 Each group is one :func:`kinet_rl.pipeline.evaluate_rearrangement` (3 blocks, top camera, 64 px,
 T = 40, ``--workers`` worker processes, default 2) written to ``<out>/<group>.json`` with its wall
 time and planner; a group whose JSON exists is skipped, so an interrupted run resumes (episode by
-episode on the same machine).
+episode, from the episodes stored under ``<out>/<group>/``).
 """
 
 from __future__ import annotations
