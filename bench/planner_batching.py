@@ -1,9 +1,10 @@
 """Planning several rearrangement episodes in one batched planner call: does it pay on this CPU?
 
 Times one GraphMPC plan (the evaluation's default budget: 64 candidates x 3 iterations, K = 6,
-horizon 1) on the real :class:`~kinet_rl.models.KINetModelEnv` of a default-size KINet for a
-batch of ``B`` episodes at once, and reports the time per episode-plan against ``B = 1``. All
-batch sizes are timed in interleaved rounds (best round kept) so background load hits them alike.
+horizon 1) over the world model of a default-size KINet (``model.world_model("graph_distance")``
+in a :class:`~kinet_rl.planners.PushWorldModelEnv`) for a batch of ``B`` episodes at once, and
+reports the time per episode-plan against ``B = 1``. All batch sizes are timed in interleaved
+rounds (best round kept) so background load hits them alike.
 The last line is ``ratio: X``, the time per episode-plan at the largest batch over ``B = 1``
 (below 1: batching episodes is faster).
 
@@ -16,9 +17,11 @@ import argparse
 import time
 
 import torch
+from tensordict import TensorDict
 
-from kinet_rl.models import GraphDistanceReward, KINetModelEnv, KINetWorldModel
-from kinet_rl.planners import GraphMPCPlanner
+from kinet_rl.keys import GOAL_PIXELS, PIXELS
+from kinet_rl.models import KINetWorldModel
+from kinet_rl.planners import GraphMPCPlanner, PushWorldModelEnv
 
 BUDGET = {"planning_horizon": 1, "optim_steps": 3, "num_candidates": 64, "top_k": 8}
 
@@ -32,9 +35,10 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
-    env = KINetModelEnv(KINetWorldModel().eval(), GraphDistanceReward())
+    world_model = KINetWorldModel().eval().world_model("graph_distance")
+    env = PushWorldModelEnv(world_model)
     images = torch.randint(0, 256, (2, 64, 64, 3), dtype=torch.uint8)
-    start = env.observe(images[0], images[1])
+    start = world_model.observe(TensorDict({PIXELS: images[0], GOAL_PIXELS: images[1]}, []))
     planners = {b: GraphMPCPlanner(env, **BUDGET) for b in args.batches}
     states = {b: start.expand(b).clone() if b > 1 else start for b in args.batches}
     best = {b: float("inf") for b in args.batches}

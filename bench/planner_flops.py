@@ -1,12 +1,14 @@
-"""Planner FLOPs: KINetModelEnv's fast path against the straightforward computation, per plan.
+"""Planner FLOPs: KINet's world model's fast path against the straightforward computation, per plan.
 
 For each K and horizon, a randomly initialised KINet of the default size (64x64 images,
-graph-similarity reward) plans one push with GraphMPC (CEM, ``candidates`` x ``iterations``)
-twice from the same images and planner seed: through ``KINetModelEnv(model)`` (fast: goal graph
-kept per goal image, the start graph encoded once for all candidates, edges without self-loops,
-pair MLPs split per node) and through ``KINetModelEnv(model, fast=False)`` (the straightforward
-computation). torch's ``FlopCounterMode`` counts the FLOPs of one control step, ``observe``
-(detector on the current image, goal graph) plus the plan, after each env has seen the goal once.
+objective ``graph``: the cosine graph similarity) plans one push with GraphMPC (CEM,
+``candidates`` x ``iterations``) twice from the same images and planner seed, over a
+``PushWorldModelEnv`` of ``model.world_model("graph")`` (fast: goal graph kept per goal image,
+the start graph encoded once for all candidates, edges without self-loops, pair MLPs split per
+node) and of ``model.world_model("graph", fast=False)`` (the straightforward computation).
+torch's ``FlopCounterMode`` counts the FLOPs of one control step, ``world_model.observe``
+(detector on the current image, goal graph) plus the plan, after each world model has seen the
+goal once.
 The largest difference between the two planned pushes is printed as a check that both compute the
 same function. The last line is ``ratio: X``, the geometric mean over settings of the fast FLOPs
 over the straightforward FLOPs per plan.
@@ -20,19 +22,20 @@ import argparse
 import math
 
 import torch
+from tensordict import TensorDict
 from torch.utils.flop_counter import FlopCounterMode
 
-from kinet_rl.keys import ACTION
-from kinet_rl.models import KINetModelEnv, KINetWorldModel
-from kinet_rl.planners import GraphMPCPlanner
+from kinet_rl.keys import ACTION, GOAL_PIXELS, PIXELS
+from kinet_rl.models import KINetWorldModel
+from kinet_rl.planners import GraphMPCPlanner, PushWorldModel, PushWorldModelEnv
 
 
 def control_step_flops(
-    env: KINetModelEnv, planner: GraphMPCPlanner, pixels: torch.Tensor, goal: torch.Tensor
+    world_model: PushWorldModel, planner: GraphMPCPlanner, observation: TensorDict
 ) -> tuple[int, int, torch.Tensor]:
     """FLOPs of ``observe`` and of one plan, and the planned push."""
     with FlopCounterMode(display=False) as counter:
-        state = env.observe(pixels, goal)
+        state = world_model.observe(observation)
     observe = counter.get_total_flops()
     with FlopCounterMode(display=False) as counter:
         push = planner(state)[ACTION]
@@ -49,6 +52,7 @@ def main() -> None:
     args = parser.parse_args()
     torch.manual_seed(0)
     pixels, goal = torch.randint(0, 256, (2, 64, 64, 3), dtype=torch.uint8)
+    observation = TensorDict({PIXELS: pixels, GOAL_PIXELS: goal}, [])
     print(
         f"candidates={args.candidates} iterations={args.iterations} top_k={args.top_k}; "
         "GFLOP per control step (observe + plan)"
@@ -65,17 +69,17 @@ def main() -> None:
         model = KINetWorldModel(num_keypoints=num_keypoints).eval()
         flops, pushes = {}, {}
         for fast in (False, True):
-            env = KINetModelEnv(model, fast=fast)
+            world_model = model.world_model("graph", fast=fast)
             planner = GraphMPCPlanner(
-                env,
+                PushWorldModelEnv(world_model),
                 planning_horizon=horizon,
                 optim_steps=args.iterations,
                 num_candidates=args.candidates,
                 top_k=args.top_k,
                 generator=torch.Generator().manual_seed(1),
             )
-            env.observe(pixels, goal)  # the goal was seen at the episode's first step
-            *flops[fast], pushes[fast] = control_step_flops(env, planner, pixels, goal)
+            world_model.observe(observation)  # the goal was seen at the episode's first step
+            *flops[fast], pushes[fast] = control_step_flops(world_model, planner, observation)
         ratio = sum(flops[True]) / sum(flops[False])
         log_ratio += math.log(ratio)
         diff = (pushes[True] - pushes[False]).abs().max().item()

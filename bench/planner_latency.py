@@ -1,22 +1,23 @@
-"""Planner latency: GraphMPCPlanner against torchrl's CEMPlanner on the same graph-like model env.
+"""Planner latency: GraphMPCPlanner against torchrl's CEMPlanner on the same graph-like world model.
 
-The stand-in world model does message passing over K keypoint nodes (fully connected graph,
-128-unit MLPs by default, 3 rounds), so its compute resembles a KINet forward model. For each K and
-horizon the script times one plan (``optim_steps`` iterations of ``num_candidates`` rollouts)
-for torchrl's ``CEMPlanner`` (as shipped, and inside ``torch.no_grad()``), and our planner
-with the CEM and MPPI rules, and reports the achieved FLOP rate of our CEM plan (its FLOPs counted
-by ``FlopCounterMode``) against a large matmul on the same machine (best of before and after the
-runs). All
-contenders are timed in interleaved rounds (best round kept) so background load hits them
-alike; process CPU time is reported too, as it is far less sensitive to other processes on a
+Every contender plans over the same :class:`~kinet_rl.planners.PushWorldModelEnv`. The stand-in
+world model (a :class:`~kinet_rl.planners.PushWorldModel` with objective ``keypoints_l2``) does
+message passing over K keypoint nodes (fully connected graph, 128-unit MLPs by default, 3
+rounds), so its compute resembles a KINet forward model. For each K and horizon the script times
+one plan (``optim_steps`` iterations of ``num_candidates`` rollouts) for torchrl's
+``CEMPlanner`` (as shipped, and inside ``torch.no_grad()``), and our planner with the CEM and
+MPPI rules, and reports the achieved FLOP rate of our CEM plan (its FLOPs counted by
+``FlopCounterMode``) against a large matmul on the same machine (best of before and after the
+runs). All contenders are timed in interleaved rounds (best round kept) so background load hits
+them alike; process CPU time is reported too, as it is far less sensitive to other processes on a
 shared machine. The last line is ``ratio: X``, the geometric mean over settings of our CEM
 wall time over torchrl's CEMPlanner wall time (both without autograd); the line before the ratios
 gives our CEM's ms per plan in the first setting (by default K = 6, H = 1, 256 x 5).
 
-``--env kinet`` times the real :class:`~kinet_rl.models.KINetModelEnv` (a randomly initialised
-KINet of the default size, 64x64 images, graph-similarity reward) instead of the stand-in, and
-also our CEM on ``KINetModelEnv(model, fast=False)``, the straightforward computation (its ms per
-plan is on the ms-per-plan line).
+``--env kinet`` times the real KINet world model, ``model.world_model("graph")`` (a randomly
+initialised KINet of the default size, 64x64 images, objective ``graph``: the cosine graph
+similarity) instead of the stand-in, and also our CEM on ``model.world_model("graph",
+fast=False)``, the straightforward computation (its ms per plan is on the ms-per-plan line).
 
 Usage: python bench/planner_latency.py [--env graph|kinet] [--repeats 3] [--device cpu] [--hidden 128]
 """
@@ -33,13 +34,16 @@ from tensordict import TensorDict
 from tensordict.nn import TensorDictModule
 from torch import Tensor, nn
 from torch.utils.flop_counter import FlopCounterMode
-from torchrl.data import Bounded, Composite, Unbounded
-from torchrl.envs.model_based import ModelBasedEnvBase
-from torchrl.modules import WorldModelWrapper
 from torchrl.modules.planners import CEMPlanner
 
-from kinet_rl.keys import ACTION, KP_POS
-from kinet_rl.planners import GraphMPCPlanner, keypoint_goal_reward
+from kinet_rl.keys import ACTION, GOAL_KP_POS, GOAL_PIXELS, KP_POS, PIXELS
+from kinet_rl.planners import (
+    GraphMPCPlanner,
+    PushWorldModel,
+    PushWorldModelEnv,
+    goal_reward_head,
+    push_dynamics,
+)
 
 ROUNDS = 3
 ACTION_DIM = 4
@@ -60,7 +64,7 @@ class MessagePassingDynamics(nn.Module):
         self.updates = nn.ModuleList(_mlp(2 * hidden, hidden, hidden) for _ in range(ROUNDS))
         self.decode = _mlp(hidden, hidden, 2)
 
-    def forward(self, pos: Tensor, action: Tensor) -> Tensor:
+    def forward(self, pos: Tensor, action: Tensor) -> tuple[Tensor]:
         # pos: [*B, K, 2]; action: [*B, A]
         num_nodes = pos.shape[-2]
         act = action.unsqueeze(-2).expand(*pos.shape[:-1], ACTION_DIM)
@@ -70,56 +74,47 @@ class MessagePassingDynamics(nn.Module):
             receivers = h.unsqueeze(-2).expand_as(senders)
             incoming = message(torch.cat([receivers, senders], -1)).mean(-2)  # [*B, K, D]
             h = h + update(torch.cat([h, incoming], -1))
-        return pos + 0.1 * torch.tanh(self.decode(h))
+        return (pos + 0.1 * torch.tanh(self.decode(h)),)
 
 
-class GoalDistance(nn.Module):
-    def __init__(self, goal: Tensor) -> None:
-        super().__init__()
-        self.register_buffer("goal", goal)
-
-    def forward(self, pos: Tensor) -> Tensor:
-        return keypoint_goal_reward(pos, self.goal)
-
-
-class GraphModelEnv(ModelBasedEnvBase):
-    """Model env over K keypoints driven by :class:`MessagePassingDynamics`; 4-d push in [-1, 1]."""
-
-    def __init__(self, num_keypoints: int, hidden: int, device: torch.device) -> None:
-        goal = torch.rand(num_keypoints, 2, device=device) * 2 - 1
-        world_model = WorldModelWrapper(
-            TensorDictModule(
-                MessagePassingDynamics(hidden), in_keys=[KP_POS, ACTION], out_keys=[KP_POS]
-            ),
-            TensorDictModule(GoalDistance(goal), in_keys=[KP_POS], out_keys=["reward"]),
-        )
-        super().__init__(world_model, device=device)
-        pos_spec = Unbounded((num_keypoints, 2), device=device)
-        self.observation_spec = Composite({KP_POS: pos_spec}, device=device)
-        self.state_spec = Composite({KP_POS: pos_spec.clone()}, device=device)
-        self.action_spec = Bounded(-1.0, 1.0, (ACTION_DIM,), device=device)
-        self.reward_spec = Unbounded((1,), device=device)
-        self.num_keypoints = num_keypoints
-
-    def _reset(self, tensordict: TensorDict | None, **kwargs) -> TensorDict:
-        pos = torch.rand(self.num_keypoints, 2, device=self.device) * 2 - 1
-        return TensorDict({KP_POS: pos}, batch_size=[], device=self.device)
+def graph_world_model(num_keypoints: int, hidden: int) -> PushWorldModel:
+    """The stand-in: K keypoints moved by :class:`MessagePassingDynamics` (4-d push in [-1, 1]),
+    the goal keypoints carried along, objective ``keypoints_l2``."""
+    return PushWorldModel(
+        TensorDictModule(nn.Identity(), in_keys=[KP_POS], out_keys=[KP_POS]),
+        push_dynamics(MessagePassingDynamics(hidden), [KP_POS, ACTION], [KP_POS], [GOAL_KP_POS]),
+        goal_reward_head("keypoints_l2"),
+        {KP_POS: (num_keypoints, 2), GOAL_KP_POS: (num_keypoints, 2)},
+    )
 
 
 def make_bench_env(kind: str, num_keypoints: int, hidden: int, device: torch.device):
-    """The model env to plan on, a start state, and for KINet the same env without its fast path.
+    """The world-model env to plan on, a start state, and for KINet the same env without its fast
+    path.
 
-    The stand-in graph env has no straightforward twin (None).
+    The stand-in graph world model has no straightforward twin (None).
     """
     if kind == "graph":
-        env = GraphModelEnv(num_keypoints, hidden, device)
-        return env, env.reset(), None
-    from kinet_rl.models import KINetModelEnv, KINetWorldModel
+        world_model = graph_world_model(num_keypoints, hidden).to(device)
+        observation = TensorDict(
+            {
+                KP_POS: torch.rand(num_keypoints, 2, device=device) * 2 - 1,
+                GOAL_KP_POS: torch.rand(num_keypoints, 2, device=device) * 2 - 1,
+            },
+            batch_size=[],
+            device=device,
+        )
+        straightforward = None
+    else:
+        from kinet_rl.models import KINetWorldModel
 
-    model = KINetWorldModel(num_keypoints=num_keypoints, hidden_dim=hidden).to(device).eval()
-    env = KINetModelEnv(model)
-    pixels = torch.randint(0, 256, (2, 64, 64, 3), dtype=torch.uint8, device=device)
-    return env, env.reset(env.observe(pixels[0], pixels[1])), KINetModelEnv(model, fast=False)
+        model = KINetWorldModel(num_keypoints=num_keypoints, hidden_dim=hidden).to(device).eval()
+        world_model = model.world_model("graph")
+        pixels = torch.randint(0, 256, (2, 64, 64, 3), dtype=torch.uint8, device=device)
+        observation = TensorDict({PIXELS: pixels[0], GOAL_PIXELS: pixels[1]}, [], device=device)
+        straightforward = PushWorldModelEnv(model.world_model("graph", fast=False), device)
+    env = PushWorldModelEnv(world_model, device)
+    return env, env.reset(world_model.observe(observation)), straightforward
 
 
 def _sync(device: torch.device) -> None:
@@ -187,7 +182,7 @@ def main() -> None:
         "--env",
         choices=("graph", "kinet"),
         default="graph",
-        help="stand-in message-passing env, or the real KINetModelEnv",
+        help="stand-in message-passing world model, or the real KINet world model",
     )
     parser.add_argument(
         "--hidden", type=int, default=128, help="MLP width; small values expose planner overhead"

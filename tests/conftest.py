@@ -1,5 +1,6 @@
 """Shared fixtures: tiny untrained models, random images and transitions, a trainer on a fixed
-batch, the Hydra config folder, a full disk.
+batch, the Hydra config folder, a full disk; and the ``ycb`` marker, which skips a test (or one
+parameter of it) when no YCB assets are configured.
 
 This file also puts ``tests/`` on ``sys.path`` (pytest's default ``prepend`` import mode inserts
 the folder of a rootdir-level ``conftest.py``), so the helper modules beside it
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 import errno
 import itertools
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -28,6 +30,7 @@ from kinet_rl.baselines import (
     VisualInteractionModel,
 )
 from kinet_rl.configs import config_dir
+from kinet_rl.envs.ycb import YCB_DIR_ENV
 from kinet_rl.keys import ACTION, FUTURE_ACTION, FUTURE_PIXELS, PIXELS, PIXELS_0
 from kinet_rl.models import KINetLoss, KINetWorldModel
 from kinet_rl.training import TrainingCheckpoint
@@ -55,6 +58,30 @@ TINY_VCDN = {
 }
 #: Baseline names understood by the ``tiny_baseline`` fixture.
 BASELINES = ("forw", "forwinv", "in", "in_full", "visin", "vcdn")
+#: Why a test marked ``ycb`` is skipped, and how to run it.
+YCB_SKIP_REASON = (
+    f"needs the YCB assets: set {YCB_DIR_ENV} to a folder of YCB meshes with its manifest.json "
+    "(README, YCB assets) to run it"
+)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers",
+        f"ycb: needs the YCB assets (${YCB_DIR_ENV}); skipped when it is not set. Mark a test "
+        "with @pytest.mark.ycb, or one parameter with pytest.param(..., marks=pytest.mark.ycb).",
+    )
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Skips the tests marked ``ycb`` when ``$KINET_RL_YCB_DIR`` is not set (CI sets it, and also
+    runs the unit tests once without it)."""
+    if os.environ.get(YCB_DIR_ENV):
+        return
+    skip = pytest.mark.skip(reason=YCB_SKIP_REASON)
+    for item in items:
+        if item.get_closest_marker("ycb") is not None:
+            item.add_marker(skip)
 
 
 @pytest.fixture(scope="session")

@@ -17,7 +17,8 @@ import re
 from pathlib import Path
 
 from kinet_rl.comparison import horizon_table, table_i
-from kinet_rl.tables import CAMERAS, EXPERIMENT_SUFFIX, TASKS
+from kinet_rl.rows import ROWS
+from kinet_rl.tables import CAMERAS, TASKS
 
 ROW = re.compile(
     rf"(?P<task>{'|'.join(TASKS)})_(?P<camera>{'|'.join(CAMERAS)})view(?P<suffix>[a-z_]*?)"
@@ -30,7 +31,7 @@ def main() -> None:
     parser.add_argument("folders", type=Path, nargs="+")
     parser.add_argument("--horizons", type=int, nargs="+", default=[1, 5, 10])
     args = parser.parse_args()
-    model_of = {suffix: model for model, suffix in EXPERIMENT_SUFFIX.items()}
+    model_of = {row.experiment_suffix: name for name, row in ROWS.items()}
     found: dict[str, dict[str, dict[int, dict]]] = {}
     for folder in args.folders:
         for path in sorted(folder.glob("*/tables_forward.json")):
@@ -44,7 +45,7 @@ def main() -> None:
         model: {camera: [seeds[s] for s in sorted(seeds)] for camera, seeds in cams.items()}
         for model, cams in found.items()
     }
-    models = [m for m in EXPERIMENT_SUFFIX if m in forward]
+    models = [m for m in ROWS if m in forward]
     cameras = [c for c in CAMERAS if any(c in cams for cams in forward.values())]
     for model in models:
         seeds = {c: sorted(found[model][c]) for c in cameras if c in found[model]}

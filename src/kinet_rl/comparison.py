@@ -19,19 +19,12 @@ from kinet_rl.evaluation.images import save_line_plot
 from kinet_rl.rearrangement.methods import METHODS
 from kinet_rl.rearrangement.report import plot_curves, success_text
 from kinet_rl.rearrangement.settings import generalization_key
+from kinet_rl.rows import ROWS
 from kinet_rl.stats import mean_interval
 
-#: Row labels of the tables.
+#: Row labels of the tables: the comparison rows, random pushes and the oracle.
 LABELS = {
-    "kinet": "KINet",
-    "kinet_determ": "KINet-determ",
-    "kinet_no_ctr": "KINet-no-ctr",
-    "forw": "Forw",
-    "forwinv": "ForwInv",
-    "in": "IN (GT state)",
-    "in_full": "IN-full (GT pos, yaw, shape)",
-    "visin": "VisIN (GT state + image)",
-    "vcdn": "V-CDN",
+    **{name: row.label for name, row in ROWS.items()},
     "random": METHODS["random"].label,
     "oracle": METHODS["oracle"].label,
 }
@@ -151,15 +144,11 @@ def mpc_table(
 
 
 def _planner(row: str, kinet_method: str) -> str:
-    if row.startswith("kinet"):
-        return METHODS[kinet_method].label
-    if row in ("forw", "forwinv"):
-        return "MPC on goal-image feature distance"
-    if row == "vcdn":
-        return "MPC on goal-image keypoint distance"
-    if row in ("in", "in_full", "visin", "oracle"):
+    if row == "oracle":
         return "MPC on GT goal distance"
-    return "-"
+    if row not in ROWS:
+        return "-"
+    return ROWS[row].planner_label or METHODS[ROWS[row].method or kinet_method].label
 
 
 def table_ii(

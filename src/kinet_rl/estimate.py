@@ -41,8 +41,8 @@ from kinet_rl.data.policy import RandomPushPolicy, read_workspace_half_size
 from kinet_rl.data.storage import stored_episodes
 from kinet_rl.devices import resolve_device
 from kinet_rl.envs import make_env
-from kinet_rl.models.world_model import KINetWorldModel
 from kinet_rl.pipeline import ExperimentSettings, dataset_jobs
+from kinet_rl.rearrangement.methods import plans_every_method
 from kinet_rl.training.checkpoint import TrainingCheckpoint
 from kinet_rl.training.distributed import DistContext
 from kinet_rl.training.loggers import make_logger
@@ -189,12 +189,12 @@ class RunPlan:
             stored, complete = stored_episodes(job.path)
             datasets.append(
                 DatasetPlan(
-                    name=job.arguments["name"],
-                    num_episodes=job.arguments["num_episodes"],
+                    name=job.name,
+                    num_episodes=job.num_episodes,
                     stored=stored,
                     complete=complete,
-                    num_workers=job.arguments["num_workers"],
-                    pushes=job.env["max_steps"],
+                    num_workers=job.num_workers,
+                    pushes=job.pushes_per_episode,
                 )
             )
         return cls(settings, Path(run_dir), tuple(datasets), trained_steps(settings, run_dir))
@@ -231,9 +231,8 @@ class RunPlan:
                 line += f", ~{format_duration(dataset.seconds(rates, cores))}"
             lines.append(line)
         t = s.trainer
-        model = s.model_config["_target_"].rsplit(".", 1)[-1]
         line = (
-            f"  train {model}: {t.steps:,} steps at batch {t.batch_size}, validation every "
+            f"  train {s.model_name}: {t.steps:,} steps at batch {t.batch_size}, validation every "
             f"{t.eval_every:,} steps"
         )
         if self.trained:
@@ -251,11 +250,11 @@ class RunPlan:
         text = f"forward error at {horizons} pushes on {report.num_sequences} test sequences"
         model_class, _ = target_arguments(self.settings.model_config, "model")
         episodes = report.rearrangement_episodes
-        if issubclass(model_class, KINetWorldModel):
+        if model_class.capabilities.keypoints:
             text = f"keypoint accuracy, {text}"
-            if episodes:
-                methods = len(self.settings.rearrangement.methods)
-                text += f"; rearrangement, {episodes} episodes x {methods} methods"
+        if episodes and plans_every_method(model_class.capabilities, self.settings.rearrangement):
+            methods = len(self.settings.rearrangement.methods)
+            text += f"; rearrangement, {episodes} episodes x {methods} methods"
         return text
 
 
@@ -306,9 +305,10 @@ def measure_pushes(settings: ExperimentSettings) -> PushProbe:
     """
     pushes = probe_length(settings.trainer)
     env_fn = functools.partial(make_env, **{**settings.env, "max_steps": pushes})
-    env = seeded_env(env_fn, settings.data["seed"], 0, 1)
+    main = settings.main_dataset
+    env = seeded_env(env_fn, main.seed, 0, 1)
     try:
-        policy = RandomPushPolicy(read_workspace_half_size(env), **(settings.data["policy"] or {}))
+        policy = RandomPushPolicy(read_workspace_half_size(env), **main.policy)
         for _ in range(PROBE_TRIES):
             start = time.perf_counter()
             state = env.reset()

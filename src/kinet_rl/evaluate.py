@@ -31,7 +31,7 @@ from kinet_rl.configs import config_dir
 from kinet_rl.interrupts import exit_on_interrupt
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.models.pretrained import resolve_checkpoint
-from kinet_rl.pipeline import check_config, evaluate_rearrangement, trained_model_file
+from kinet_rl.pipeline import check_config, evaluate_rearrangement
 from kinet_rl.rearrangement import RearrangementSettings
 from kinet_rl.training.loggers import make_logger
 
@@ -54,7 +54,7 @@ def evaluate(cfg: DictConfig, run_dir: Path) -> dict[str, Any]:
     """Loads the checkpoint and runs the full evaluation; returns its summary."""
     settings = settings_from_config(cfg)
     model_class = cast(type[ConfigCheckpointMixin], get_class(cfg.model._target_))
-    default = run_dir / trained_model_file(model_class)
+    default = run_dir / model_class.model_file
     checkpoint = resolve_checkpoint(cfg.get("checkpoint") or default)
     if not checkpoint.is_file():
         raise FileNotFoundError(

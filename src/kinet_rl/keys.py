@@ -32,6 +32,9 @@ FUTURE_PIXELS = ("future", PIXELS)  # uint8 [*B, H - 1, H, W, 3] the frames afte
 KP_POS = ("keypoints", "pos")  # float32 [*B, K, 2] image coordinates in [-1, 1]
 KP_FEAT = ("keypoints", "feat")  # float32 [*B, K, D]
 KP_NODE_EMB = ("keypoints", "node_emb")  # float32 [*B, K, E] scene-graph node embeddings
+#: float32 [*B, K, E] node embeddings of the keypoints as they are (no message passing): what the
+#: goal graph's nodes are, so a predicted state compares with them (the graph_distance objective)
+KP_POS_EMB = ("keypoints", "pos_emb")
 KP_EDGE_TYPE = ("keypoints", "edge_type")  # float32 [*B, K, K - 1, C] edge-type probs (V-CDN)
 GOAL_PIXELS = ("goal", PIXELS)  # uint8 [*B, H, W, 3] goal image
 GOAL_KP_POS = ("goal", "keypoints", "pos")

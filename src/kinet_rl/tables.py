@@ -38,7 +38,6 @@ from omegaconf import DictConfig, OmegaConf
 
 from kinet_rl.atomic import atomic_write_json, atomic_write_text, directory_lock
 from kinet_rl.comparison import (
-    LABELS,
     horizon_table,
     mpc_table,
     plot_learning_curves,
@@ -59,7 +58,6 @@ from kinet_rl.data import load_dataset
 from kinet_rl.envs.geometry import SceneGeometry
 from kinet_rl.evaluation.forward import forward_errors
 from kinet_rl.interrupts import exit_on_interrupt
-from kinet_rl.models import KINetWorldModel
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.pipeline import (
     ExperimentSettings,
@@ -67,26 +65,14 @@ from kinet_rl.pipeline import (
     check_dataset_for,
     evaluate_rearrangement,
     run_experiment,
-    trained_model_file,
 )
 from kinet_rl.planners.graph_mpc import CODE_ARGUMENTS, GraphMPCPlanner, check_planner_settings
 from kinet_rl.rearrangement import RearrangementSettings
 from kinet_rl.rearrangement.report import budget_text
+from kinet_rl.rows import ROWS
 
 logger = logging.getLogger(__name__)
 
-#: Experiment-name suffix of each row model (``conf/exp/<task>_<camera>view<suffix>.yaml``).
-EXPERIMENT_SUFFIX = {
-    "kinet": "",
-    "kinet_determ": "_determ",
-    "kinet_no_ctr": "_no_ctr",
-    "forw": "_forw",
-    "forwinv": "_forwinv",
-    "in": "_in",
-    "in_full": "_in_full",
-    "visin": "_visin",
-    "vcdn": "_vcdn",
-}
 CAMERAS = ("top", "side")
 #: The tables' scenes: ``task`` of the rows' experiments, and how the tables name it.
 TASKS = {"blocks": "BlockObjs", "ycb": "YCBObjs"}
@@ -121,10 +107,10 @@ class TablesSettings:
 
     def __post_init__(self) -> None:
         for name, choices, least in (
-            ("models", tuple(EXPERIMENT_SUFFIX), 1),
+            ("models", tuple(ROWS), 1),
             ("cameras", CAMERAS, 1),
             ("generalization_models", self.models, 0),
-            ("model_overrides", tuple(EXPERIMENT_SUFFIX), 0),
+            ("model_overrides", tuple(ROWS), 0),
         ):
             values = list(getattr(self, name))
             require(
@@ -167,12 +153,12 @@ class TablesSettings:
 
 def experiment_name(model: str, camera: str, task: str = "blocks") -> str:
     """The experiment of a table row, e.g. ``blocks_topview_determ``."""
-    if model not in EXPERIMENT_SUFFIX or camera not in CAMERAS or task not in TASKS:
+    if model not in ROWS or camera not in CAMERAS or task not in TASKS:
         raise ValueError(
             f"Unknown row ({task!r}, {model!r}, {camera!r}); tasks: {list(TASKS)}, models: "
-            f"{sorted(EXPERIMENT_SUFFIX)}, cameras: {list(CAMERAS)}. Fix conf/tables/<scale>.yaml."
+            f"{sorted(ROWS)}, cameras: {list(CAMERAS)}. Fix conf/tables/<scale>.yaml."
         )
-    return f"{task}_{camera}view{EXPERIMENT_SUFFIX[model]}"
+    return f"{task}_{camera}view{ROWS[model].experiment_suffix}"
 
 
 def row_config(tables: TablesSettings, model: str, camera: str, seed: int = 0) -> DictConfig:
@@ -218,7 +204,7 @@ def check_rows(tables: TablesSettings) -> None:
 def load_model(cfg: DictConfig, run_dir: Path) -> Any:
     """The trained model of a row: ``kinet.pt`` (KINet) or ``model.pt`` (baselines)."""
     model_class = cast(type[ConfigCheckpointMixin], get_class(cfg.model._target_))
-    model: Any = model_class.from_checkpoint(run_dir / trained_model_file(model_class))
+    model: Any = model_class.from_checkpoint(run_dir / model_class.model_file)
     return model.cpu().eval()
 
 
@@ -299,7 +285,7 @@ def run_row(
         check_dataset_for(net, test)
         scene = settings.scene
         geometry = SceneGeometry.of_scene(scene.task, scene.camera, scene.image_size)
-        floor = net.detector_floor(geometry) if isinstance(net, KINetWorldModel) else None
+        floor = net.detector_floor(geometry) if ROWS[model].floor else None
         return forward_errors(
             net.object_rollout(geometry),
             test,
@@ -312,7 +298,7 @@ def run_row(
     row: dict[str, Any] = {"forward": _cached(run_dir / "tables_forward.json", forward), "mpc": {}}
     if camera == tables.mpc_camera and seed == tables.seeds[0]:
         kinet_method = rearrangement_settings(cfg, eval_overrides).kinet_method
-        method = kinet_method if isinstance(net, KINetWorldModel) else "model_mpc"
+        method = ROWS[model].method or kinet_method
         for i, budget in enumerate(tables.mpc_budgets):
             # Table II and the backgrounds run at the first budget only.
             generalization = i == 0 and model in tables.generalization_models
@@ -378,7 +364,7 @@ def _build_tables(tables: TablesSettings, out_dir: Path) -> Path:
         logger.info("Row %d/%d: %s, %s view, seed %d", i, len(rows), model, camera, seed)
         row = run_row(tables, model, camera, out_dir, seed)
         forward.setdefault(model, {}).setdefault(camera, []).append(row["forward"])
-        run_dirs.setdefault(camera, {}).setdefault(LABELS.get(model, model), []).append(
+        run_dirs.setdefault(camera, {}).setdefault(ROWS[model].label, []).append(
             run_dir_of(out_dir, experiment_name(model, camera, tables.task), seed)
         )
         for budget, by_condition in row["mpc"].items():

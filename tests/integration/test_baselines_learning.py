@@ -3,7 +3,7 @@
 V-CDN trains in two stages (perception, then dynamics on frozen keypoints), so each stage's loss
 is measured on its own, and its training report is written.
 
-Fixed seeds; data are :class:`~kinet_rl.baselines.ToyPushData` (32 px coloured squares, 3
+Fixed seeds; data are ``tests/toy_pushing.py``'s ``ToyPushData`` (32 px coloured squares, 3
 objects). Thresholds come from measured runs with margin (docs/baselines.md lists the numbers).
 """
 
@@ -19,13 +19,13 @@ from kinet_rl.baselines import (
     ImageForwardModel,
     ObjectForwardLoss,
     ObjectInteractionModel,
-    ToyPushData,
     VCDNLoss,
     VCDNWorldModel,
     VisualInteractionModel,
 )
 from kinet_rl.evaluation.forward import forward_errors
 from kinet_rl.evaluation.report import TrainingReport
+from toy_pushing import ToyPushData
 
 pytestmark = pytest.mark.slow
 

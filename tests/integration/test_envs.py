@@ -7,7 +7,6 @@ import functools
 import itertools
 import json
 import logging
-import os
 
 import gymnasium
 import numpy as np
@@ -21,10 +20,8 @@ from kinet_rl.envs.scene import CAMERA_FRAMINGS
 
 pytestmark = pytest.mark.slow
 
-YCB_DIR = os.environ.get("KINET_RL_YCB_DIR")
-needs_ycb = pytest.mark.skipif(
-    not YCB_DIR, reason="KINET_RL_YCB_DIR is not set (YCB assets needed)"
-)
+#: Skipped without the YCB assets ($KINET_RL_YCB_DIR; the ``ycb`` marker of tests/conftest.py).
+needs_ycb = pytest.mark.ycb
 
 
 def _maybe_ycb(task):

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from dataclasses import replace
 from pathlib import Path
 
@@ -20,8 +19,9 @@ from kinet_rl.evaluate import evaluate
 from kinet_rl.models.checkpointing import checkpoint_scene
 from kinet_rl.pipeline import evaluate_rearrangement
 from kinet_rl.rearrangement import runner
-from kinet_rl.rearrangement.controllers import OracleController, RandomController
+from kinet_rl.rearrangement.controllers import RandomController
 from kinet_rl.rearrangement.episodes import make_episode, mean_goal_distance, run_episode
+from kinet_rl.rearrangement.methods import METHODS, MethodContext
 from kinet_rl.rearrangement.settings import RearrangementSettings, TaskSettings
 
 pytestmark = pytest.mark.slow
@@ -52,8 +52,9 @@ def test_oracle_mpc_beats_random_pushes_in_the_simulator() -> None:
     for seed in range(3):
         for method in finals:
             episode = make_episode(SCENE, task, seed)
+            oracle = RearrangementSettings(scene=SCENE, planner=ORACLE, oracle_contact_radius=0.035)
             controller = (
-                OracleController(SCENE, ORACLE, 0.035, [seed])
+                METHODS["oracle"].controller(MethodContext(None, SCENE, oracle, (seed,)))
                 if method == "oracle"
                 else RandomController([seed])
             )
@@ -177,25 +178,26 @@ def test_evaluate_entry_point_composes_eval_group(tmp_path: Path, tiny_kinet, co
 def test_image_controllers_are_never_handed_ground_truth(monkeypatch, tiny_kinet) -> None:
     """Every KINet method's controller sees only ``pixels``; the GT-state oracle sees positions."""
     from kinet_rl.keys import OBJECT_POS, PIXELS
-    from kinet_rl.rearrangement.controllers import KINetController
-    from kinet_rl.rearrangement.methods import METHODS
+    from kinet_rl.rearrangement.controllers import PlannerController
     from kinet_rl.rearrangement.runner import Job, run_jobs
 
     seen: list[set[str]] = []
-    act = KINetController.act
+    act = PlannerController.act
     monkeypatch.setattr(
-        KINetController, "act", lambda self, obs: seen.extend(map(set, obs)) or act(self, obs)
+        PlannerController, "act", lambda self, obs: seen.extend(map(set, obs)) or act(self, obs)
     )
     settings = RearrangementSettings(
         scene=SceneSettings(image_size=32), task=TaskSettings(num_steps=2), workers=1, videos=0,
         planner={"planning_horizon": 1, "optim_steps": 1, "num_candidates": 8, "top_k": 2},
     )  # fmt: skip
     condition = settings.conditions(generalization=False)[0]
-    kinet_methods = [name for name, method in METHODS.items() if method.needs == "kinet"]
+    kinet_methods = [name for name, method in METHODS.items() if method.objective is not None]
     for name in kinet_methods:
         run_jobs([Job(condition, name, 10_000, False)], settings, tiny_kinet())
     assert seen == [{PIXELS}] * (2 * len(kinet_methods))
-    assert METHODS["oracle"].observes == (OBJECT_POS,) and METHODS["random"].observes == ()
+    assert METHODS["oracle"].observed(None) == (OBJECT_POS,) and not METHODS["random"].observed(
+        None
+    )
 
 
 def test_batched_episodes_run_as_they_do_one_at_a_time(tiny_kinet) -> None:
@@ -221,7 +223,7 @@ def test_batched_episodes_run_as_they_do_one_at_a_time(tiny_kinet) -> None:
     assert len(set(finals["random"])) == 3  # the episodes differ: the test compares something
 
 
-@pytest.mark.skipif(not os.environ.get("KINET_RL_YCB_DIR"), reason="YCB assets needed")
+@pytest.mark.ycb
 def test_episodes_of_held_out_ycb_objects_draw_only_those() -> None:
     held_out = ("004_sugar_box", "007_tuna_fish_can", "025_mug")
     scene = SceneSettings(task="ycb", image_size=32, ycb_objects=held_out)

@@ -22,7 +22,7 @@ LAYERS = [
     {"data", "planners", "training"},
     {"models"},
     {"baselines"},
-    {"evaluation"},
+    {"evaluation", "rows"},
     {"rearrangement"},
     {"comparison"},
     {"pipeline"},
@@ -139,3 +139,67 @@ def test_planners_import_neither_models_nor_hydra():
         names = imported_names(MODULES[module])
         assert not any(n.startswith(("kinet_rl.models", "kinet_rl.baselines")) for n in names)
         assert not {n.split(".")[0] for n in names} & {"hydra", "omegaconf"}
+
+
+def model_classes() -> set[str]:
+    """Names of the model classes: every class of ``models``/``baselines`` that declares what it
+    can do (``capabilities``), and their bases that are models too."""
+    import inspect
+
+    import kinet_rl.baselines
+    import kinet_rl.models
+
+    names = set()
+    for package in (kinet_rl.models, kinet_rl.baselines):
+        for _, cls in inspect.getmembers(package, inspect.isclass):
+            if hasattr(cls, "capabilities"):
+                names.update(
+                    base.__name__
+                    for base in cls.__mro__
+                    if base.__module__.startswith(("kinet_rl.models", "kinet_rl.baselines"))
+                )
+    return names - {"ConfigCheckpointMixin"}
+
+
+def class_dispatch(source: str, classes: set[str]) -> list[str]:
+    """Each ``isinstance``/``issubclass`` test against one of ``classes`` in ``source``, and each
+    ``getattr`` of a model's declaration by string (``getattr(model, "...")``)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, ast.Call) or not isinstance(node.func, ast.Name):
+            continue
+        if node.func.id in ("isinstance", "issubclass") and len(node.args) == 2:
+            tested = {n.id for n in ast.walk(node.args[1]) if isinstance(n, ast.Name)}
+            tested |= {n.attr for n in ast.walk(node.args[1]) if isinstance(n, ast.Attribute)}
+            found += [
+                f"line {node.lineno}: {node.func.id}(..., {name})" for name in tested & classes
+            ]
+        model = node.args[0] if node.args else None
+        named = isinstance(model, ast.Name) and model.id in ("model", "net", "model_class")
+        if node.func.id == "getattr" and named and len(node.args) > 1:
+            found.append(f"line {node.lineno}: getattr({node.args[0].id}, ...)")
+    return found
+
+
+def test_class_dispatch_finder_finds_dispatch():
+    classes = {"KINetWorldModel", "VCDNWorldModel"}
+    source = (
+        "a = isinstance(net, KINetWorldModel)\n"
+        "b = issubclass(cls, (models.VCDNWorldModel, int))\n"
+        "c = getattr(model, 'variable_object_count', False)\n"
+        "d = isinstance(x, dict)\n"
+    )
+    assert len(class_dispatch(source, classes)) == 3
+
+
+def test_no_dispatch_on_model_classes_outside_the_row_registry():
+    """Behaviour comes from what a model declares (``capabilities``, ``planning``,
+    ``model_file``) or from the row registry (``kinet_rl.rows``), never from its class."""
+    classes = model_classes()
+    assert {"KINetWorldModel", "VCDNWorldModel", "ObjectInteractionModel"} <= classes
+    offenders = {
+        module: found
+        for module, path in MODULES.items()
+        if module != "kinet_rl.rows" and (found := class_dispatch(path.read_text(), classes))
+    }
+    assert not offenders, offenders

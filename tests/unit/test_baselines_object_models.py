@@ -12,10 +12,10 @@ from kinet_rl.baselines import (
     ObjectCountError,
     ObjectForwardLoss,
     ObjectInteractionModel,
-    ToyPushData,
     VisualInteractionModel,
     crop_objects,
 )
+from toy_pushing import ToyPushData
 
 B, N, H = 4, 3, 32
 TINY_IN = {"embed_dim": 8, "hidden_dim": 16, "num_hidden": 1, "num_rounds": 2}

@@ -1,4 +1,4 @@
-"""Tests for the analytic push model and the oracle model env."""
+"""Tests for the analytic push model and the oracle's world model."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import torch
 from tensordict import TensorDict
 from torchrl.envs.utils import check_env_specs
 
-from kinet_rl.baselines import AnalyticPushModelEnv, analytic_push
+from kinet_rl.baselines import AnalyticPushModel, analytic_push
 from kinet_rl.keys import GOAL_OBJECT_POS, OBJECT_POS
-from kinet_rl.planners import GraphMPCPlanner, StateModelEnv
+from kinet_rl.planners import GraphMPCPlanner, PlanningInterface, PushWorldModelEnv
 
 HALF = 0.2
 R = 0.03
@@ -27,31 +27,66 @@ def test_push_moves_only_objects_on_its_path_to_just_past_the_end() -> None:
     assert moved[3].tolist() == pytest.approx([lateral_end, 0.02])
 
 
+def test_oracle_declares_what_it_plans_with() -> None:
+    model = AnalyticPushModel(2, HALF, R)
+    assert isinstance(model, PlanningInterface)
+    assert model.planning.objective == "object_distance"
+    assert model.capabilities.observes == (OBJECT_POS,)
+    assert model.capabilities.goal == (GOAL_OBJECT_POS,)
+    assert model.capabilities.needs_ground_truth
+    with pytest.raises(ValueError, match="Oracle cannot plan with the objective 'keypoints'"):
+        model.world_model("keypoints")
+
+
 def test_oracle_env_specs_and_reward() -> None:
-    env = AnalyticPushModelEnv(2, HALF, R)
-    assert isinstance(env, StateModelEnv)
-    start = TensorDict(
+    world_model = AnalyticPushModel(2, HALF, R).world_model()
+    env = PushWorldModelEnv(world_model)
+    observation = TensorDict(
         {OBJECT_POS: torch.tensor([[0.0, 0.0], [0.1, 0.1]]), GOAL_OBJECT_POS: torch.zeros(2, 2)}, []
     )
+    start = world_model.observe(observation)
+    assert set(start.keys(True, True)) == {OBJECT_POS, GOAL_OBJECT_POS}
     check_env_specs(env, tensordict=env.reset(start))
     out = env.step(env.reset(start).set("action", torch.zeros(4)))["next"]  # zero-length push
     assert out["reward"].item() == pytest.approx(-(0.1 * 2**0.5) / 2)
-    with pytest.raises(KeyError, match="object_pos"):
+    with pytest.raises(KeyError, match=r"start state .*'object_pos'.*\('goal', 'object_pos'\)"):
         env.reset()
-    with pytest.raises(
-        KeyError, match=r"AnalyticPushModelEnv.reset needs .*\('goal', 'object_pos'\)"
-    ):
-        env.reset(start.exclude(GOAL_OBJECT_POS))
+    with pytest.raises(KeyError, match="object_pos"):
+        env.reset(start.exclude(OBJECT_POS))
+
+
+def test_oracle_env_reset_names_a_missing_goal() -> None:
+    env = PushWorldModelEnv(AnalyticPushModel(2, HALF, R).world_model())
+    start = TensorDict({OBJECT_POS: torch.zeros(2, 2)}, [])
+    with pytest.raises(KeyError, match=r"\('goal', 'object_pos'\)"):
+        env.reset(start)
+
+
+def test_oracle_reward_matches_the_analytic_push_at_any_batch() -> None:
+    env = PushWorldModelEnv(AnalyticPushModel(2, HALF, R).world_model())
+    gen = torch.Generator().manual_seed(0)
+    pos = torch.rand(3, 5, 2, 2, generator=gen) * 0.2 - 0.1
+    goal = torch.rand(3, 5, 2, 2, generator=gen) * 0.2 - 0.1
+    action = torch.rand(3, 5, 4, generator=gen) * 2 - 1
+    start = TensorDict({OBJECT_POS: pos, GOAL_OBJECT_POS: goal}, [3, 5])
+    out = env.step(env.reset(start).set("action", action))["next"]
+    moved = analytic_push(pos, action, HALF, R)
+    torch.testing.assert_close(out[OBJECT_POS], moved)
+    expected = -(moved - goal).norm(dim=-1).mean(-1, keepdim=True)
+    torch.testing.assert_close(out["reward"], expected)
 
 
 def test_oracle_planner_brings_objects_to_the_goal_in_the_model() -> None:
     torch.manual_seed(0)
-    env = AnalyticPushModelEnv(2, HALF, R)
+    world_model = AnalyticPushModel(2, HALF, R).world_model()
+    env = PushWorldModelEnv(world_model)
     planner = GraphMPCPlanner(env, planning_horizon=1, optim_steps=5, num_candidates=256, top_k=16)
     goal = torch.tensor([[0.1, 0.0], [-0.05, -0.1]])
     td = env.reset(
-        TensorDict(
-            {OBJECT_POS: torch.tensor([[0.0, 0.0], [-0.05, 0.05]]), GOAL_OBJECT_POS: goal}, []
+        world_model.observe(
+            TensorDict(
+                {OBJECT_POS: torch.tensor([[0.0, 0.0], [-0.05, 0.05]]), GOAL_OBJECT_POS: goal}, []
+            )
         )
     )
     start = (td[OBJECT_POS] - goal).norm(dim=-1).mean().item()

@@ -1,4 +1,5 @@
-"""Baseline model envs and the baseline MPC controller (no simulation; tiny models)."""
+"""The baselines' world models (``model.world_model()``), planning over them and the baseline MPC
+method's controller (no simulation; tiny models)."""
 
 from __future__ import annotations
 
@@ -7,19 +8,16 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import torch
+from tensordict import TensorDict
 from torchrl.envs.utils import check_env_specs
 
-from kinet_rl.baselines.model_env import (
-    FeatureModelEnv,
-    KeypointGraphModelEnv,
-    ObjectModelEnv,
-    make_baseline_env,
-)
 from kinet_rl.envs import SceneSettings
 from kinet_rl.keys import (
+    ACTION,
     GOAL_IMAGE_FEAT,
     GOAL_KP_POS,
     GOAL_OBJECT_POS,
+    GOAL_PIXELS,
     IMAGE_FEAT,
     KP_EDGE_TYPE,
     KP_POS,
@@ -27,10 +25,11 @@ from kinet_rl.keys import (
     OBJECT_POS,
     OBJECT_SHAPE,
     OBJECT_YAW,
+    PIXELS,
 )
 from kinet_rl.pipeline import evaluate_rearrangement
-from kinet_rl.planners import GraphMPCPlanner, StateModelEnv
-from kinet_rl.rearrangement.controllers import BaselineMPCController
+from kinet_rl.planners import GraphMPCPlanner, PushWorldModel, PushWorldModelEnv
+from kinet_rl.rearrangement.controllers import PlannerController
 from kinet_rl.rearrangement.methods import METHODS, MethodContext
 from kinet_rl.rearrangement.settings import RearrangementSettings
 
@@ -48,90 +47,141 @@ def observation(seed: int) -> dict[str, np.ndarray]:
     }
 
 
-def start_state(env, seed: int = 0):
+def observed(model, seed: int = 0) -> TensorDict:
+    """What ``model`` observes of ``observation(seed)`` and its goal, ``observation(seed + 1)``."""
     obs, goal = observation(seed), observation(seed + 1)
-    pixels = torch.from_numpy(obs["pixels"])
-    if isinstance(env, ObjectModelEnv):
-        state = {key: torch.from_numpy(obs[key]) for key in env.model.state_keys}
-        return env.observe(
-            pixels,
-            torch.from_numpy(obs["object_pos"]),
-            torch.from_numpy(goal["object_pos"]),
-            **state,
-        )
-    return env.observe(pixels, torch.from_numpy(goal["pixels"]))
+    goals = {GOAL_PIXELS: goal["pixels"], GOAL_OBJECT_POS: goal["object_pos"]}
+    entries = {key: torch.from_numpy(obs[key]) for key in model.capabilities.observes}
+    entries.update({key: torch.from_numpy(goals[key]) for key in model.capabilities.goal})
+    return TensorDict(entries, [])
+
+
+def start_state(world_model: PushWorldModel, model, seed: int = 0) -> TensorDict:
+    return world_model.observe(observed(model, seed))
 
 
 STATE_KEYS = {
-    ObjectModelEnv: [OBJECT_POS, OBJECT_FEAT, GOAL_OBJECT_POS],
-    FeatureModelEnv: [IMAGE_FEAT, GOAL_IMAGE_FEAT],
-    KeypointGraphModelEnv: [KP_POS, KP_EDGE_TYPE, GOAL_KP_POS],
+    "forw": [IMAGE_FEAT, GOAL_IMAGE_FEAT],
+    "forwinv": [IMAGE_FEAT, GOAL_IMAGE_FEAT],
+    "in": [OBJECT_POS, OBJECT_FEAT, GOAL_OBJECT_POS],
+    "in_full": [OBJECT_POS, OBJECT_FEAT, GOAL_OBJECT_POS],
+    "visin": [OBJECT_POS, OBJECT_FEAT, GOAL_OBJECT_POS],
+    "vcdn": [KP_POS, KP_EDGE_TYPE, GOAL_KP_POS],
+}
+OBJECTIVE = {
+    "forw": "feature_distance",
+    "forwinv": "feature_distance",
+    "in": "object_distance",
+    "in_full": "object_distance",
+    "visin": "object_distance",
+    "vcdn": "keypoints_distance",
 }
 
 
 @pytest.mark.parametrize("name", ["forw", "forwinv", "in", "in_full", "visin", "vcdn"])
-def test_model_env_specs_and_state_keys(name: str, tiny_baseline) -> None:
-    env = make_baseline_env(tiny_baseline(name))
-    state = start_state(env)
-    keys = STATE_KEYS[type(env)]
-    assert set(keys) == set(env.state_spec.keys(True, True))
-    assert env.state_spec.is_in(state)
-    assert not env.batch_locked and isinstance(env, StateModelEnv)
+def test_world_model_env_specs_and_state_keys(name: str, tiny_baseline) -> None:
+    model = tiny_baseline(name)
+    assert model.planning.objective == OBJECTIVE[name]
+    assert model.capabilities.objectives == (OBJECTIVE[name],)
+    world_model = model.world_model()
+    env = PushWorldModelEnv(world_model)
+    state = start_state(world_model, model)
+    keys = STATE_KEYS[name]
+    assert set(keys) == set(world_model.state_shapes)
+    assert set(keys) == set(env.observation_spec.keys(True, True))
+    assert set(state.keys(True, True)) == set(keys)
+    assert env.observation_spec.is_in(state)
+    assert not env.batch_locked
     check_env_specs(env, tensordict=env.reset(state))
 
 
-def test_object_env_reward_is_minus_mean_goal_distance_of_the_prediction(tiny_baseline) -> None:
+@pytest.mark.parametrize("name", ["forw", "in", "vcdn"])
+def test_world_model_refuses_an_objective_it_does_not_declare(name: str, tiny_baseline) -> None:
+    model = tiny_baseline(name)
+    with pytest.raises(
+        ValueError, match=f"cannot plan with the objective 'graph'.*{OBJECTIVE[name]}"
+    ):
+        model.world_model("graph")
+    with pytest.raises(ValueError, match="Unknown planning objective 'nope'"):
+        model.world_model("nope")
+
+
+def test_object_reward_is_minus_mean_goal_distance_of_the_prediction(tiny_baseline) -> None:
     model = tiny_baseline("in")
-    env = ObjectModelEnv(model)
-    state = start_state(env).expand(5).clone()
+    world_model = model.world_model()
+    env = PushWorldModelEnv(world_model)
+    state = start_state(world_model, model).expand(5).clone()
     state["action"] = torch.rand(5, 4) * 2 - 1
     out = env.step(state)
     pred = model.predict(state[OBJECT_POS], state[OBJECT_FEAT], state["action"])
     expected = -(pred - state[GOAL_OBJECT_POS]).norm(dim=-1).mean(-1, keepdim=True)
     torch.testing.assert_close(out["next", "reward"], expected)
     torch.testing.assert_close(out["next", OBJECT_POS], pred)
+    torch.testing.assert_close(out["next", GOAL_OBJECT_POS], state[GOAL_OBJECT_POS])
 
 
-def test_feature_env_reward_is_minus_squared_feature_distance(tiny_baseline) -> None:
+def test_feature_reward_is_minus_squared_feature_distance(tiny_baseline) -> None:
     model = tiny_baseline("forw")
-    env = FeatureModelEnv(model)
-    state = start_state(env).expand(5).clone()
+    world_model = model.world_model()
+    env = PushWorldModelEnv(world_model)
+    state = start_state(world_model, model).expand(5).clone()
     state["action"] = torch.rand(5, 4) * 2 - 1
     out = env.step(state)
     pred = model.predict(state[IMAGE_FEAT], state["action"])
     expected = -(pred - state[GOAL_IMAGE_FEAT]).pow(2).sum(-1, keepdim=True)
     torch.testing.assert_close(out["next", "reward"], expected)
+    goal = torch.from_numpy(observation(1)["pixels"])
+    torch.testing.assert_close(state[GOAL_IMAGE_FEAT][0], model.eval().encode(goal))
 
 
 def test_visin_state_carries_crop_features_of_the_current_image(tiny_baseline) -> None:
-    env = ObjectModelEnv(tiny_baseline("visin"))
-    a, b = start_state(env, 0), start_state(env, 5)
+    model = tiny_baseline("visin")
+    world_model = model.world_model()
+    a, b = start_state(world_model, model, 0), start_state(world_model, model, 5)
     assert a[OBJECT_FEAT].shape == (N, 4)
     assert not torch.allclose(a[OBJECT_FEAT], b[OBJECT_FEAT])
+    state = a.clone().set(ACTION, torch.rand(4) * 2 - 1)
+    out = PushWorldModelEnv(world_model).step(state)
+    torch.testing.assert_close(out["next", OBJECT_FEAT], a[OBJECT_FEAT])  # carried over
 
 
 def test_in_full_state_carries_yaw_and_shape_and_needs_them(tiny_baseline) -> None:
-    env = ObjectModelEnv(tiny_baseline("in_full"))
-    state = start_state(env)
-    obs = observation(0)
-    yaw = torch.from_numpy(obs["object_yaw"])
+    model = tiny_baseline("in_full")
+    world_model = model.world_model()
+    state = start_state(world_model, model)
+    yaw = torch.from_numpy(observation(0)["object_yaw"])
     assert state[OBJECT_FEAT].shape == (N, 10)
     torch.testing.assert_close(state[OBJECT_FEAT][:, :2], torch.stack([yaw.cos(), yaw.sin()], -1))
+    assert model.capabilities.needs_ground_truth and not model.capabilities.plans_from_images
+    observes = METHODS["model_mpc"].observed(model)
+    assert OBJECT_YAW in observes and OBJECT_SHAPE in observes
+
+
+def test_in_full_observe_names_a_missing_state_entry(tiny_baseline) -> None:
+    model = tiny_baseline("in_full")
     with pytest.raises(KeyError, match="object_shape"):
-        env.observe(
-            torch.from_numpy(obs["pixels"]),
-            torch.from_numpy(obs["object_pos"]),
-            torch.from_numpy(obs["object_pos"]),
-            object_yaw=yaw,
-        )
-    observed = METHODS["model_mpc"].observes
-    assert OBJECT_YAW in observed and OBJECT_SHAPE in observed
+        model.world_model().observe(observed(model).exclude(OBJECT_SHAPE))
 
 
-def test_in_env_planning_improves_the_goal_reward_over_random_actions(tiny_baseline) -> None:
+@pytest.mark.parametrize("name", ["in", "in_full", "visin", "forw", "vcdn"])
+def test_a_batch_is_observed_as_each_element_alone(name: str, tiny_baseline) -> None:
+    model = tiny_baseline(name)
+    world_model = model.world_model()
+    batch = torch.stack([observed(model, 0), observed(model, 5)])
+    together = world_model.observe(batch)
+    assert together.batch_size == (2,)
+    for i, seed in enumerate((0, 5)):
+        alone = start_state(world_model, model, seed)
+        for key in STATE_KEYS[name]:
+            torch.testing.assert_close(together[i][key], alone[key], msg=str(key))
+
+
+def test_in_planning_improves_the_goal_reward_over_random_actions(tiny_baseline) -> None:
     """CEM finds pushes whose predicted reward beats the mean of random pushes."""
-    env = ObjectModelEnv(tiny_baseline("in"))
-    state = start_state(env)
+    model = tiny_baseline("in")
+    world_model = model.world_model()
+    env = PushWorldModelEnv(world_model)
+    state = start_state(world_model, model)
     planner = GraphMPCPlanner(env, generator=torch.Generator().manual_seed(0), **PLANNER)
     planned = planner(state.clone())["action"]
     random_actions = torch.rand(64, 4, generator=torch.Generator().manual_seed(1)) * 2 - 1
@@ -147,25 +197,28 @@ def test_in_env_planning_improves_the_goal_reward_over_random_actions(tiny_basel
 def test_controller_acts_in_bounds_through_the_method_registry(name: str, tiny_baseline) -> None:
     settings = RearrangementSettings(methods=("model_mpc",), planner=PLANNER)
     context = MethodContext(tiny_baseline(name), SceneSettings(image_size=SIZE), settings, (0,))
-    controller = METHODS["model_mpc"].make_controller(context)
-    assert isinstance(controller, BaselineMPCController)
+    controller = METHODS["model_mpc"].controller(context)
+    assert isinstance(controller, PlannerController)
+    assert controller.push_planner.objective == OBJECTIVE[name]
     goal = observation(1)
     controller.reset([SimpleNamespace(goal_pos=goal["object_pos"], goal_pixels=goal["pixels"])])
     action = controller.act([observation(0)])
     assert action.shape == (1, 4) and np.isfinite(action).all()
     assert np.abs(action).max() <= 1.0
+    state = controller.push_planner.last_state
+    assert set(state.keys(True, True)) == set(STATE_KEYS[name])
+    assert PIXELS not in state.keys(True, True)
 
 
 def test_wrong_model_kinds_are_refused_with_a_clear_error(tiny_baseline, tmp_path) -> None:
     settings = RearrangementSettings(methods=("model_mpc",), planner=PLANNER)
     kinet_settings = RearrangementSettings(methods=("kinet_graph",), planner=PLANNER)
-    with pytest.raises(TypeError, match="model_mpc"):
+    with pytest.raises(ValueError, match="kinet_graph.*use method 'model_mpc'"):
         evaluate_rearrangement(tiny_baseline("in"), kinet_settings, tmp_path / "unused")
-    with pytest.raises(TypeError, match="kinet_graph"):
-        make_baseline_env(torch.nn.Linear(2, 2))
     with pytest.raises(ValueError, match="need a model"):
         evaluate_rearrangement(None, settings, tmp_path / "unused")
     assert not (tmp_path / "unused").exists()  # refused before anything is written
-    controller = BaselineMPCController(tiny_baseline("in"), PLANNER, (0,))
+    context = MethodContext(tiny_baseline("in"), SceneSettings(image_size=SIZE), settings, (0,))
+    controller = METHODS["model_mpc"].controller(context)
     with pytest.raises(RuntimeError, match="reset"):
         controller.act([observation(0)])

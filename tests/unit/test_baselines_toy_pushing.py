@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from kinet_rl.baselines import ToyPushData
-from kinet_rl.baselines.toy_pushing import push_objects
+from toy_pushing import ToyPushData, push_objects
 
 
 def test_push_moves_only_objects_on_the_push_line():

@@ -1,5 +1,5 @@
 """V-CDN: keys and shapes, the inferred graph, the two training stages and what each trains,
-checkpoints, and its model env (tiny untrained model, no simulation)."""
+checkpoints, and its world model (tiny untrained model, no simulation)."""
 
 from __future__ import annotations
 
@@ -9,17 +9,18 @@ from tensordict import TensorDict
 from torchrl.envs.utils import check_env_specs
 
 from conftest import TINY_VCDN
-from kinet_rl.baselines import KeypointGraphModelEnv, VCDNLoss, VCDNWorldModel, make_baseline_env
+from kinet_rl.baselines import VCDNLoss, VCDNWorldModel
 from kinet_rl.envs import SceneSettings
 from kinet_rl.keys import (
     ACTION,
     GOAL_KP_POS,
+    GOAL_PIXELS,
     KP_EDGE_TYPE,
     KP_POS,
     PIXELS,
     PIXELS_0,
 )
-from kinet_rl.planners import GraphMPCPlanner
+from kinet_rl.planners import GraphMPCPlanner, PushWorldModelEnv
 
 K, C, SIZE = TINY_VCDN["num_keypoints"], 3, 16
 
@@ -195,11 +196,14 @@ def test_checkpoint_round_trip_predicts_the_same(model, tmp_path) -> None:
     )
 
 
-def test_model_env_state_reward_and_planning(model) -> None:
-    env = make_baseline_env(model)
-    assert isinstance(env, KeypointGraphModelEnv)
+def test_world_model_state_reward_and_planning(model) -> None:
+    assert model.planning.objective == "keypoints_distance"
+    world_model = model.world_model()
+    env = PushWorldModelEnv(world_model)
     td = batch(2)
-    state = env.observe(td[PIXELS][0], td["next", PIXELS][0])
+    observation = TensorDict({PIXELS: td[PIXELS][0], GOAL_PIXELS: td["next", PIXELS][0]}, [])
+    state = world_model.observe(observation)
+    assert set(state.keys(True, True)) == {KP_POS, KP_EDGE_TYPE, GOAL_KP_POS}
     assert state[KP_EDGE_TYPE].shape == (K, K - 1, C)
     torch.testing.assert_close(state[GOAL_KP_POS], model.keypoints(td["next", PIXELS][0]))
     check_env_specs(env, tensordict=env.reset(state))
@@ -209,6 +213,7 @@ def test_model_env_state_reward_and_planning(model) -> None:
     predicted = model.dynamics(candidates[KP_POS], candidates[KP_EDGE_TYPE], candidates[ACTION])
     expected = -(predicted - candidates[GOAL_KP_POS]).norm(dim=-1).mean(-1, keepdim=True)
     torch.testing.assert_close(out["next", "reward"], expected)
+    torch.testing.assert_close(out["next", KP_EDGE_TYPE], candidates[KP_EDGE_TYPE])  # carried
     planner = GraphMPCPlanner(
         env, generator=torch.Generator().manual_seed(0), num_candidates=32, top_k=4
     )

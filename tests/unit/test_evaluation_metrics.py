@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from kinet_rl.evaluation.forward import split_errors
-from kinet_rl.evaluation.metrics import keypoint_hit_rate, position_error
+from kinet_rl.evaluation.metrics import keypoint_hit_rate
 
 
 def test_hit_rate_counts_objects_with_a_close_keypoint():
@@ -14,12 +14,6 @@ def test_hit_rate_counts_objects_with_a_close_keypoint():
     kp = torch.tensor([[[12.0, 10.0], [60.0, 60.0], [9.0, 11.0]]])
     assert keypoint_hit_rate(kp, obj, radius_px=4.0) == 0.5
     assert keypoint_hit_rate(kp, obj, radius_px=30.0) == 1.0
-
-
-def test_position_error_is_the_mean_distance_per_sample():
-    pred = torch.tensor([[[0.0, 0.0], [1.0, 1.0]], [[3.0, 4.0], [0.0, 0.0]]])
-    target = torch.zeros(2, 2, 2)
-    torch.testing.assert_close(position_error(pred, target), torch.tensor([2**0.5 / 2, 2.5]))
 
 
 def test_hit_rate_counts_only_the_selected_objects() -> None:

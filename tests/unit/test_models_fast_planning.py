@@ -6,9 +6,17 @@ import pytest
 import torch
 from tensordict import TensorDict
 
-from kinet_rl.keys import ACTION, GOAL_KP_NODE_EMB, GOAL_KP_POS, KP_FEAT, KP_POS
-from kinet_rl.models import GraphDistanceReward, KINetModelEnv, KINetWorldModel
-from kinet_rl.planners import GraphMPCPlanner
+from kinet_rl.keys import (
+    ACTION,
+    GOAL_KP_NODE_EMB,
+    GOAL_KP_POS,
+    GOAL_PIXELS,
+    KP_FEAT,
+    KP_POS,
+    PIXELS,
+)
+from kinet_rl.models import KINetWorldModel
+from kinet_rl.planners import GraphMPCPlanner, PushWorldModelEnv
 
 CANDIDATES = 16
 PREDICTION_FIELDS = ("next_pos", "next_nodes", "nodes", "edge_prob", "kl")
@@ -77,7 +85,7 @@ def test_fast_rollouts_return_what_the_straightforward_ones_do(k, horizon, train
     actions = torch.rand(CANDIDATES, horizon, 4, generator=torch.Generator().manual_seed(4))
     returns = {}
     for fast in (True, False):
-        env = KINetModelEnv(model, GraphDistanceReward(), fast=fast)
+        env = PushWorldModelEnv(model.world_model("graph_distance", fast=fast))
         planner = GraphMPCPlanner(env, planning_horizon=horizon, num_candidates=CANDIDATES, top_k=4)
         torch.manual_seed(5)  # same edge samples in training
         with torch.no_grad():
@@ -92,7 +100,7 @@ def test_the_start_graph_is_encoded_once_for_all_candidates(small_kinet):
     model.interaction.node_encoder.register_forward_hook(
         lambda module, inputs, output: encoded_rows.append(inputs[0].shape[:-1].numel())
     )
-    env = KINetModelEnv(model)
+    env = PushWorldModelEnv(model.world_model("graph"))
     planner = GraphMPCPlanner(
         env, planning_horizon=2, optim_steps=1, num_candidates=CANDIDATES, top_k=4
     )
@@ -105,7 +113,7 @@ def test_same_seed_plans_the_same_push_fast_or_not(small_kinet):
     model = small_kinet(6)
     pushes = []
     for fast in (True, False):
-        env = KINetModelEnv(model, fast=fast)
+        env = PushWorldModelEnv(model.world_model("graph", fast=fast))
         generator = torch.Generator().manual_seed(6)
         planner = GraphMPCPlanner(env, planning_horizon=3, optim_steps=3, generator=generator)
         pushes.append(planner(start_state(model))[ACTION])
@@ -115,24 +123,27 @@ def test_same_seed_plans_the_same_push_fast_or_not(small_kinet):
 
 def test_the_goal_graph_is_computed_once_per_goal_image_and_model(small_kinet, random_images):
     model = small_kinet(4)
-    env, reference = KINetModelEnv(model), KINetModelEnv(model, fast=False)
+    fast, reference = model.world_model(), model.world_model(fast=False)
+
+    def observe(world_model, pixels, goal):
+        goal = goal.expand(*pixels.shape[:-3], *goal.shape)
+        return world_model.observe(TensorDict({PIXELS: pixels, GOAL_PIXELS: goal}, [2]))
+
     goal, other_goal = random_images((), 1), random_images((), 2)
-    expected = reference.observe(random_images((2,), 0), other_goal)
+    expected = observe(reference, random_images((2,), 0), other_goal)
     goal_images: list[torch.Tensor] = []
     model.interaction.node_encoder.register_forward_hook(
         lambda module, inputs, output: goal_images.append(inputs[0])
     )
     for step in range(3):
-        env.observe(random_images((2,), 10 + step), goal.clone())  # a new tensor every call
+        observe(fast, random_images((2,), 10 + step), goal.clone())  # a new tensor every call
     assert len(goal_images) == 1
-    state = env.observe(random_images((2,), 0), other_goal)
+    state = observe(fast, random_images((2,), 0), other_goal)
     assert len(goal_images) == 2  # a new goal image is embedded
     for key in (GOAL_KP_NODE_EMB, GOAL_KP_POS, KP_POS, KP_FEAT):
         torch.testing.assert_close(state[key], expected[key])
     with torch.no_grad():
         model.interaction.node_encoder[0].bias.add_(1.0)  # e.g. a training step
-    changed = env.observe(random_images((2,), 0), other_goal)
+    changed = observe(fast, random_images((2,), 0), other_goal)
     assert len(goal_images) == 3  # new weights, new embeddings
     assert not torch.allclose(changed[GOAL_KP_NODE_EMB], state[GOAL_KP_NODE_EMB])
-    with pytest.raises(ValueError, match="do not broadcast"):
-        env.observe(random_images((2,), 0), random_images((3,), 1))

@@ -118,6 +118,25 @@ def test_a_count_range_is_for_the_main_dataset_of_a_keypoint_model(model):
     )
 
 
+def test_settings_name_their_model_and_datasets_as_typed_values():
+    settings = settings_of(
+        "data.seed=7",
+        "++data.generalization={five: {env: {num_objects: 5}}, side: {env: {camera: side}, "
+        "num_episodes: 4, seed: 30}}",
+    )
+    assert settings.model_name == "KINetWorldModel"
+    main, five, side = dataset_jobs(settings.env, settings.data)
+    assert settings.main_dataset == main and main.path == settings.dataset_path
+    assert (main.name, main.seed) == ("blocks_top64", 7)
+    assert (main.num_episodes, main.num_workers) == (100, 2)
+    assert main.policy == settings.data["policy"]
+    assert main.pushes_per_episode == settings.env["max_steps"]
+    assert (five.name, five.seed, five.num_episodes) == ("five", 8, 100)
+    assert (side.name, side.seed, side.num_episodes) == ("side", 30, 4)
+    assert five.scene_differences(main) == ["num_objects"]
+    assert side.scene_differences(main) == ["camera"] and main.scene_differences(main) == []
+
+
 @pytest.mark.slow  # collects episodes on MuJoCo
 def test_the_report_scores_the_generalization_sets_of_the_training_scene(
     tmp_path, tiny_kinet, tiny_baseline

@@ -8,12 +8,13 @@ from pathlib import Path
 import pytest
 import torch
 from tensordict import TensorDict
+from tensordict.nn import TensorDictModule
 from torchrl.data import Categorical
 from torchrl.envs import RewardScaling, TransformedEnv
 
 import kinet_rl.planners
-from kinet_rl.keys import ACTION, KP_POS
-from kinet_rl.planners import GraphMPCPlanner
+from kinet_rl.keys import ACTION, KP_POS, REWARD
+from kinet_rl.planners import GraphMPCPlanner, PushWorldModel, PushWorldModelEnv, push_dynamics
 from toy_model_envs import QuadraticModelEnv, TrapModelEnv
 
 GOAL = torch.tensor([[2.5, -1.5]])
@@ -227,30 +228,35 @@ def test_planners_package_imports_neither_models_nor_hydra() -> None:
     assert not forbidden
 
 
+class _Stay(torch.nn.Module):
+    def forward(self, pos):
+        return (pos,)
+
+
 class _TwoGoals(torch.nn.Module):
     """Reward: minus the distance of the action to the nearer of two opposite goals."""
 
-    def forward(self, pos, action):
+    def forward(self, action):
         goals = torch.tensor([[0.8, 0.8, 0.8, 0.8], [-0.8, -0.8, -0.8, -0.8]])
         dist = (action.unsqueeze(-2) - goals).norm(dim=-1).min(-1).values
-        return pos, -dist.unsqueeze(-1)
+        return -dist.unsqueeze(-1)
 
 
-def _bimodal_env():
-    from tensordict.nn import TensorDictModule
-
-    from kinet_rl.planners import StateModelEnv
-
-    step = TensorDictModule(_TwoGoals(), [("p",), "action"], [("p",), "reward"])
-    return StateModelEnv(step, {("p",): (1,)})
+def _bimodal_env() -> PushWorldModelEnv:
+    """A push world model whose reward has two modes in the push itself."""
+    world_model = PushWorldModel(
+        TensorDictModule(torch.nn.Identity(), ["p"], ["p"]),
+        push_dynamics(_Stay(), ["p"], ["p"], []),
+        TensorDictModule(_TwoGoals(), [ACTION], [REWARD]),
+        {"p": (1,)},
+    )
+    return PushWorldModelEnv(world_model)
 
 
 @pytest.mark.parametrize(
     "options", [{}, {"return_best": True}, {"return_best": True, "keep_elites": 4}]
 )
 def test_best_sequence_avoids_averaging_two_modes(options):
-    from tensordict import TensorDict
-
     env = _bimodal_env()
     dist = []
     for seed in range(8):

@@ -12,12 +12,13 @@ from kinet_rl.rearrangement.settings import DEFAULT_METHODS, Condition, Rearrang
 def test_every_method_is_declared_once_with_a_label() -> None:
     assert set(DEFAULT_METHODS) < set(METHODS) and "model_mpc" in METHODS
     assert all(name == method.name and method.label for name, method in METHODS.items())
-    kinet = [m.name for m in METHODS.values() if m.needs == "kinet"]
+    kinet = [m.name for m in METHODS.values() if m.objective is not None]
     assert kinet == [
         "kinet_graph", "kinet_graph_dot", "kinet_graph_distance", "kinet_keypoints",
         "kinet_keypoints_l2", "kinet_keypoints_distance",
     ]  # fmt: skip
-    assert {m.name for m in METHODS.values() if m.needs is None} == {"random", "oracle"}
+    assert all(METHODS[name].objective == name.removeprefix("kinet_") for name in kinet)
+    assert {m.name for m in METHODS.values() if not m.plans_with_model} == {"random", "oracle"}
 
 
 def test_bad_methods_are_reported() -> None:
@@ -42,19 +43,22 @@ def test_a_baseline_of_any_object_count_plans_the_generalization_cells(tiny_base
     check_model(conditions, tiny_baseline("vcdn"))
 
 
-def test_models_that_cannot_plan_a_method_are_reported(tiny_kinet) -> None:
+def test_models_that_cannot_plan_a_method_are_reported(tiny_kinet, tiny_baseline) -> None:
     conditions = RearrangementSettings(methods=("random", "oracle")).conditions()
     check_model(conditions, None)  # no method needs a model
     with pytest.raises(ValueError, match=r"Methods \['kinet_graph'\] need a model"):
         check_model(RearrangementSettings(methods=("kinet_graph",)).conditions(), None)
-    with pytest.raises(TypeError, match="kinet_"):
-        check_model(RearrangementSettings(methods=("model_mpc",)).conditions(), tiny_kinet())
+    check_model(RearrangementSettings(methods=("model_mpc",)).conditions(), tiny_kinet())
+    with pytest.raises(ValueError, match="'graph', which a VCDNWorldModel does not declare"):
+        check_model(
+            RearrangementSettings(methods=("kinet_graph",)).conditions(), tiny_baseline("vcdn")
+        )
 
 
 def test_a_controller_is_refused_for_the_wrong_model(tiny_kinet, tiny_baseline) -> None:
     settings = RearrangementSettings()
     context = MethodContext(tiny_baseline("in"), SceneSettings(), settings, seeds=(0,))
-    with pytest.raises(TypeError, match="plans with KINet"):
+    with pytest.raises(ValueError, match="model_mpc"):
         METHODS["kinet_graph_distance"].controller(context)
     with pytest.raises(ValueError, match="need a model"):
         METHODS["kinet_graph"].controller(MethodContext(None, SceneSettings(), settings, (0,)))
@@ -71,8 +75,15 @@ def test_conditions_compare_by_value_so_worker_results_find_theirs() -> None:
     assert condition("generalization") != condition("comparison")
 
 
-def test_methods_that_plan_from_images_observe_only_images() -> None:
+def test_a_planning_method_observes_what_its_model_declares(tiny_kinet, tiny_baseline) -> None:
     for method in METHODS.values():
-        if method.needs == "kinet":
-            assert method.observes == ("pixels",), method.name
-    assert "object_pos" in METHODS["model_mpc"].observes  # IN/VisIN: GT-state ceilings
+        if method.objective is not None:
+            assert method.observed(tiny_kinet()) == ("pixels",), method.name
+    for name in ("forw", "forwinv", "vcdn"):
+        assert METHODS["model_mpc"].observed(tiny_baseline(name)) == ("pixels",)
+    assert METHODS["model_mpc"].observed(tiny_baseline("in")) == ("object_pos",)
+    in_full = METHODS["model_mpc"].observed(tiny_baseline("in_full"))
+    assert in_full == ("object_pos", "object_yaw", "object_shape")  # GT-state ceilings
+    assert METHODS["model_mpc"].observed(tiny_baseline("visin")) == ("pixels", "object_pos")
+    assert METHODS["oracle"].observed(None) == ("object_pos",)
+    assert METHODS["random"].observed(None) == ()

@@ -1,4 +1,4 @@
-"""Baselines of the KINet paper: Forw, ForwInv, IN, VisIN (Table I) and V-CDN, their model envs,
+"""Baselines of the KINet paper: Forw, ForwInv, IN, VisIN (Table I) and V-CDN, their world models,
 and the oracle's analytic push model on ground-truth state; IN-full, IN on the full
 ground-truth state (position, yaw and block geometry), is a stronger state-based ceiling.
 
@@ -15,17 +15,16 @@ from kinet_rl.baselines.image_models import (
     ImageForwardModel,
     MotionProbe,
 )
+from kinet_rl.baselines.imagination import (
+    feature_world_model,
+    object_world_model,
+    vcdn_world_model,
+)
 from kinet_rl.baselines.losses import (
     ImageForwardLoss,
     ObjectForwardLoss,
     VCDNLoss,
     feature_info_nce,
-)
-from kinet_rl.baselines.model_env import (
-    FeatureModelEnv,
-    KeypointGraphModelEnv,
-    ObjectModelEnv,
-    make_baseline_env,
 )
 from kinet_rl.baselines.object_models import (
     FullStateInteractionModel,
@@ -34,36 +33,33 @@ from kinet_rl.baselines.object_models import (
     ObjectStateRollout,
     VisualInteractionModel,
 )
-from kinet_rl.baselines.oracle import AnalyticPushModelEnv, analytic_push
-from kinet_rl.baselines.toy_pushing import ToyPushData
+from kinet_rl.baselines.oracle import AnalyticPushModel, analytic_push
 from kinet_rl.baselines.vcdn import EdgeTypeDynamics, EdgeTypeInference, VCDNWorldModel
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 
 __all__ = [
-    "AnalyticPushModelEnv",
+    "AnalyticPushModel",
     "ConfigCheckpointMixin",
     "ConvEncoder",
     "EdgeTypeDynamics",
     "EdgeTypeInference",
-    "FeatureModelEnv",
     "FeatureObjectRollout",
     "FullStateInteractionModel",
     "ImageForwardInverseModel",
     "ImageForwardLoss",
     "ImageForwardModel",
-    "KeypointGraphModelEnv",
     "MotionProbe",
     "ObjectCountError",
     "ObjectForwardLoss",
     "ObjectInteractionModel",
-    "ObjectModelEnv",
     "ObjectStateRollout",
-    "ToyPushData",
     "VCDNLoss",
     "VCDNWorldModel",
     "VisualInteractionModel",
     "analytic_push",
     "crop_objects",
     "feature_info_nce",
-    "make_baseline_env",
+    "feature_world_model",
+    "object_world_model",
+    "vcdn_world_model",
 ]

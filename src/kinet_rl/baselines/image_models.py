@@ -23,12 +23,19 @@ from tensordict import TensorDictBase
 from torch import Tensor, nn
 
 from kinet_rl.baselines.encoders import ConvEncoder
+from kinet_rl.baselines.imagination import feature_world_model
 from kinet_rl.devices import model_device
 from kinet_rl.envs.geometry import SceneGeometry
 from kinet_rl.envs.workspace import workspace_for
-from kinet_rl.keys import ACTION, IMAGE_FEAT, OBJECT_POS, PIXELS
+from kinet_rl.keys import ACTION, GOAL_PIXELS, IMAGE_FEAT, OBJECT_POS, PIXELS
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.models.interaction import ACTION_DIM, mlp
+from kinet_rl.planners.world_model import (
+    ModelCapabilities,
+    PlanningDefaults,
+    PushWorldModel,
+    check_objective,
+)
 
 
 class MotionProbe(nn.Module):
@@ -72,6 +79,13 @@ class ImageForwardModel(ConfigCheckpointMixin, nn.Module):
     """
 
     checkpoint_format = "kinet_rl.ImageForwardModel/1"
+    label = "Forw"
+    #: Has an inverse model ``u = f_inv(z, z')`` (ForwInv), trained by ``loss_inv``.
+    has_inverse_model = False
+    capabilities = ModelCapabilities(
+        observes=(PIXELS,), goal=(GOAL_PIXELS,), objectives=("feature_distance",)
+    )
+    planning = PlanningDefaults("feature_distance")
 
     def __init__(
         self,
@@ -124,6 +138,12 @@ class ImageForwardModel(ConfigCheckpointMixin, nn.Module):
         tensordict.set(("next", *IMAGE_FEAT), self.predict(feat, tensordict.get(ACTION)))
         return tensordict
 
+    def world_model(self, objective: str | None = None) -> PushWorldModel:
+        """This model as a ``torchrl.modules.WorldModel`` in image-feature space
+        (:func:`~kinet_rl.baselines.imagination.feature_world_model`)."""
+        name = check_objective(self.capabilities, objective or self.planning.objective, self.label)
+        return feature_world_model(self, name)
+
     def object_rollout(self, geometry: SceneGeometry | None = None) -> FeatureObjectRollout:
         """The :class:`~kinet_rl.evaluation.forward.ObjectRollout` of this model.
 
@@ -143,6 +163,8 @@ class ImageForwardInverseModel(ImageForwardModel):
     """
 
     checkpoint_format = "kinet_rl.ImageForwardInverseModel/1"
+    label = "ForwInv"
+    has_inverse_model = True
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)

@@ -12,7 +12,7 @@ from tensordict import TensorDict, TensorDictBase
 from torch import Tensor
 from torchrl.objectives import LossModule
 
-from kinet_rl.baselines.image_models import ImageForwardInverseModel, ImageForwardModel
+from kinet_rl.baselines.image_models import ImageForwardModel
 from kinet_rl.baselines.object_models import ObjectInteractionModel
 from kinet_rl.baselines.vcdn import VCDNWorldModel
 from kinet_rl.keys import (
@@ -88,7 +88,7 @@ class ImageForwardLoss(LossModule):
             inv_weight=inv_weight,
             probe_weight=probe_weight,
         )
-        if inv_weight > 0 and not isinstance(world_model, ImageForwardInverseModel):
+        if inv_weight > 0 and not world_model.has_inverse_model:
             raise ValueError(
                 f"inv_weight={inv_weight} needs an inverse model, but the model is a "
                 f"{type(world_model).__name__}; use model=forwinv (ImageForwardInverseModel) or "
@@ -116,7 +116,7 @@ class ImageForwardLoss(LossModule):
             "loss_ctr": self.ctr_weight
             * feature_info_nce(predicted, next_feat, self.ctr_temperature),
         }
-        if isinstance(model, ImageForwardInverseModel):
+        if model.has_inverse_model:
             inferred = model.infer_action(feat, next_feat)
             losses["loss_inv"] = self.inv_weight * (inferred - action).pow(2).sum(-1).mean()
         scale = model.position_scale

@@ -29,6 +29,7 @@ from tensordict import TensorDictBase
 from torch import Tensor, nn
 
 from kinet_rl.baselines.encoders import ConvEncoder, crop_objects
+from kinet_rl.baselines.imagination import object_world_model
 from kinet_rl.devices import model_device
 from kinet_rl.envs.geometry import (
     OBJECT_CENTRE_HEIGHT,
@@ -37,9 +38,23 @@ from kinet_rl.envs.geometry import (
     camera_projection,
 )
 from kinet_rl.envs.workspace import workspace_for
-from kinet_rl.keys import ACTION, NEXT_OBJECT_POS, OBJECT_POS, OBJECT_SHAPE, OBJECT_YAW, PIXELS
+from kinet_rl.keys import (
+    ACTION,
+    GOAL_OBJECT_POS,
+    NEXT_OBJECT_POS,
+    OBJECT_POS,
+    OBJECT_SHAPE,
+    OBJECT_YAW,
+    PIXELS,
+)
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.models.interaction import KeypointInteractionNet
+from kinet_rl.planners.world_model import (
+    ModelCapabilities,
+    PlanningDefaults,
+    PushWorldModel,
+    check_objective,
+)
 
 
 @lru_cache(maxsize=8)
@@ -69,11 +84,16 @@ class ObjectInteractionModel(ConfigCheckpointMixin, nn.Module):
     """
 
     checkpoint_format = "kinet_rl.ObjectInteractionModel/1"
+    label = "IN"
     #: Size of the per-object node feature (none for IN).
     node_feature_dim = 0
     #: Entries of a state that :meth:`node_features` reads besides ``OBJECT_POS`` and ``PIXELS``
     #: (observed by the env, stored by the dataset; planning hands them over).
     state_keys: tuple[str, ...] = ()
+    capabilities = ModelCapabilities(
+        observes=(OBJECT_POS,), goal=(GOAL_OBJECT_POS,), objectives=("object_distance",)
+    )
+    planning = PlanningDefaults("object_distance")
 
     def __init__(
         self,
@@ -147,6 +167,12 @@ class ObjectInteractionModel(ConfigCheckpointMixin, nn.Module):
         """
         return ObjectStateRollout(self)
 
+    def world_model(self, objective: str | None = None) -> PushWorldModel:
+        """This model as a ``torchrl.modules.WorldModel`` on ground-truth object positions
+        (:func:`~kinet_rl.baselines.imagination.object_world_model`)."""
+        name = check_objective(self.capabilities, objective or self.planning.objective, self.label)
+        return object_world_model(self, name)
+
 
 class VisualInteractionModel(ObjectInteractionModel):
     """VisIN baseline: IN whose nodes also carry conv features of a crop around each object.
@@ -175,6 +201,10 @@ class VisualInteractionModel(ObjectInteractionModel):
     """
 
     checkpoint_format = "kinet_rl.VisualInteractionModel/1"
+    label = "VisIN"
+    capabilities = ModelCapabilities(
+        observes=(PIXELS, OBJECT_POS), goal=(GOAL_OBJECT_POS,), objectives=("object_distance",)
+    )
     camera_position: Tensor  # [3] buffer
     camera_rotation: Tensor  # [3, 3] buffer
 
@@ -266,8 +296,14 @@ class FullStateInteractionModel(ObjectInteractionModel):
     """
 
     checkpoint_format = "kinet_rl.FullStateInteractionModel/1"
+    label = "IN-full"
     node_feature_dim = 10
     state_keys = (OBJECT_YAW, OBJECT_SHAPE)
+    capabilities = ModelCapabilities(
+        observes=(OBJECT_POS, OBJECT_YAW, OBJECT_SHAPE),
+        goal=(GOAL_OBJECT_POS,),
+        objectives=("object_distance",),
+    )
 
     def node_features(self, state: TensorDictBase) -> Tensor:
         """``[*B, N, 10]``: cos and sin of ``OBJECT_YAW``, ``OBJECT_SHAPE`` in workspace units."""

@@ -1,4 +1,4 @@
-"""Oracle model env: an analytic push model on the simulator's ground-truth object positions."""
+"""The oracle: an analytic push model on the simulator's ground-truth object positions."""
 
 from __future__ import annotations
 
@@ -6,8 +6,15 @@ import torch
 from tensordict.nn import TensorDictModule
 from torch import Tensor, nn
 
-from kinet_rl.keys import ACTION, GOAL_OBJECT_POS, OBJECT_POS, STEP_REWARD
-from kinet_rl.planners.model_env import StateModelEnv
+from kinet_rl.keys import ACTION, GOAL_OBJECT_POS, OBJECT_POS
+from kinet_rl.planners.objectives import goal_reward_head
+from kinet_rl.planners.world_model import (
+    ModelCapabilities,
+    PlanningDefaults,
+    PushWorldModel,
+    check_objective,
+    push_dynamics,
+)
 
 
 def analytic_push(
@@ -44,44 +51,57 @@ def analytic_push(
     return object_pos + shift * direction
 
 
-class _AnalyticStep(nn.Module):
-    def __init__(self, half_size: float, contact_radius: float) -> None:
-        super().__init__()
-        self.half_size = half_size
-        self.contact_radius = contact_radius
+class AnalyticPushModel(nn.Module):
+    """The oracle's world model: ground-truth object positions and :func:`analytic_push`.
 
-    def forward(self, pos: Tensor, action: Tensor, goal: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-        nxt = analytic_push(pos, action, self.half_size, self.contact_radius)
-        reward = -(nxt - goal).norm(dim=-1).mean(-1, keepdim=True)  # [*B, 1] mean metres
-        return nxt, reward, goal
-
-
-class AnalyticPushModelEnv(StateModelEnv):
-    """A model env on ground-truth object positions with :func:`analytic_push` dynamics.
-
-    Used for the oracle baseline: it plans with the true object state and a hand-written push
-    model, so it bounds what a planner gains from a perfect state estimate (its dynamics are
-    approximate: no rotation, no object-object contact). Reward: minus the mean distance
-    (metres) of the objects to their goal positions (identities known).
+    It plans with the true object state and a hand-written push model, so it bounds what a
+    planner gains from a perfect state estimate (its dynamics are approximate: no rotation, no
+    object-object contact). Objective: the mean distance (metres) of the objects to their goal
+    positions (identities known).
 
     Keys:
-        State/observation: ``OBJECT_POS`` ``[*B, N, 2]`` and ``GOAL_OBJECT_POS`` ``[*B, N, 2]``.
-        Action ``[*B, 4]`` in ``[-1, 1]``; reward ``[*B, 1]``.
+        Encoder: ``OBJECT_POS`` ``[*B, N, 2]`` and ``GOAL_OBJECT_POS`` ``[*B, N, 2]`` in, both
+        carried as the state. Action ``[*B, 4]`` in ``[-1, 1]``; reward ``[*B, 1]``.
 
     Args:
         num_objects: ``N``.
         half_size: Workspace half size, metres.
         contact_radius: Object-plus-pusher radius of the push model, metres.
+        planning: Planning defaults (objective ``object_distance``).
     """
 
-    def __init__(self, num_objects: int, half_size: float, contact_radius: float = 0.035) -> None:
-        step = TensorDictModule(
-            _AnalyticStep(half_size, contact_radius),
-            in_keys=[OBJECT_POS, ACTION, GOAL_OBJECT_POS],
-            out_keys=[OBJECT_POS, STEP_REWARD, GOAL_OBJECT_POS],
+    capabilities = ModelCapabilities(
+        observes=(OBJECT_POS,), goal=(GOAL_OBJECT_POS,), objectives=("object_distance",)
+    )
+    label = "Oracle"
+    scene = None
+
+    def __init__(
+        self,
+        num_objects: int,
+        half_size: float,
+        contact_radius: float = 0.035,
+        planning: PlanningDefaults | None = None,
+    ) -> None:
+        super().__init__()
+        self.num_objects = num_objects
+        self.half_size = half_size
+        self.contact_radius = contact_radius
+        self.planning = planning or PlanningDefaults("object_distance")
+
+    def forward(self, pos: Tensor, action: Tensor) -> tuple[Tensor]:
+        """Object positions after ``action``."""
+        return (analytic_push(pos, action, self.half_size, self.contact_radius),)
+
+    def world_model(self, objective: str | None = None) -> PushWorldModel:
+        """Its ``torchrl.modules.WorldModel`` (see the class ``Keys:``)."""
+        objective = check_objective(
+            self.capabilities, objective or self.planning.objective, self.label
         )
-        super().__init__(
-            step,
-            {OBJECT_POS: (num_objects, 2), GOAL_OBJECT_POS: (num_objects, 2)},
-            reset_hint="pass the start and goal object positions, metres.",
+        n = self.num_objects
+        return PushWorldModel(
+            TensorDictModule(nn.Identity(), in_keys=[OBJECT_POS], out_keys=[OBJECT_POS]),
+            push_dynamics(self, [OBJECT_POS, ACTION], [OBJECT_POS], [GOAL_OBJECT_POS]),
+            goal_reward_head(objective),
+            {OBJECT_POS: (n, 2), GOAL_OBJECT_POS: (n, 2)},
         )

@@ -24,7 +24,8 @@ import torch.nn.functional as F
 from tensordict import TensorDictBase
 from torch import Tensor, nn
 
-from kinet_rl.keys import ACTION, KP_EDGE_TYPE, KP_POS, PIXELS
+from kinet_rl.baselines.imagination import vcdn_world_model
+from kinet_rl.keys import ACTION, GOAL_PIXELS, KP_EDGE_TYPE, KP_POS, PIXELS
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
 from kinet_rl.models.interaction import (
     PUSH_FEATURE_DIM,
@@ -36,6 +37,12 @@ from kinet_rl.models.interaction import (
 )
 from kinet_rl.models.keypoint_model import KeypointWorldModel
 from kinet_rl.models.keypoints import KeypointDetector, KeypointReconstructor, pixels_to_input
+from kinet_rl.planners.world_model import (
+    ModelCapabilities,
+    PlanningDefaults,
+    PushWorldModel,
+    check_objective,
+)
 
 #: Size of :func:`~kinet_rl.models.interaction.edge_geometry`'s raw edge features.
 EDGE_GEOMETRY_DIM = 3
@@ -198,6 +205,15 @@ class VCDNWorldModel(ConfigCheckpointMixin, KeypointWorldModel):
 
     checkpoint_format = "kinet_rl.VCDNWorldModel/1"
     label = "V-CDN"
+    capabilities = ModelCapabilities(
+        observes=(PIXELS,),
+        goal=(GOAL_PIXELS,),
+        objectives=("keypoints_distance",),
+        any_object_count=True,
+        reconstructs=True,
+        keypoints=True,
+    )
+    planning = PlanningDefaults("keypoints_distance")
 
     def __init__(
         self,
@@ -252,6 +268,12 @@ class VCDNWorldModel(ConfigCheckpointMixin, KeypointWorldModel):
             pos = self.dynamics(pos, edge_types, actions[:, h])
             steps.append(pos)
         return torch.stack(steps, dim=1)
+
+    def world_model(self, objective: str | None = None) -> PushWorldModel:
+        """V-CDN as a ``torchrl.modules.WorldModel`` on its keypoints and inferred graph
+        (:func:`~kinet_rl.baselines.imagination.vcdn_world_model`)."""
+        name = check_objective(self.capabilities, objective or self.planning.objective, self.label)
+        return vcdn_world_model(self, name)
 
     @torch.no_grad()
     def rollout_keypoints(self, pixels: Tensor, actions: Tensor) -> Tensor:

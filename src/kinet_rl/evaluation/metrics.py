@@ -1,4 +1,4 @@
-"""Metrics against ground-truth objects: keypoint hits and object-position errors.
+"""A metric against ground-truth objects: the keypoint hit rate (:func:`keypoint_hit_rate`).
 
 How keypoints are related to objects is KINet's own read-out
 (:mod:`kinet_rl.models.object_rollout`); these metrics only score its output.
@@ -26,8 +26,3 @@ def keypoint_hit_rate(
     if counted is None:
         return hits.float().mean().item()
     return (hits & counted).sum().item() / max(int(counted.sum().item()), 1)
-
-
-def position_error(pred: Tensor, target: Tensor) -> Tensor:
-    """Mean Euclidean error per sample: [*B, N, 2] x [*B, N, 2] -> [*B]."""
-    return (pred - target).norm(dim=-1).mean(dim=-1)

@@ -24,7 +24,6 @@ from kinet_rl.evaluation.forward import (
 )
 from kinet_rl.evaluation.images import draw_keypoints, image_grid, save_png, upscale
 from kinet_rl.keys import ACTION, NEXT_PIXELS, PIXELS, PIXELS_0
-from kinet_rl.models.keypoint_model import KeypointWorldModel
 from kinet_rl.training.loggers import log_media
 
 log = logging.getLogger(__name__)
@@ -144,7 +143,7 @@ class TrainingReport:
     def has_keypoints(self) -> bool:
         """Whether the model is a keypoint model (KINet, V-CDN); other baselines get forward
         errors only."""
-        return isinstance(self.model, KeypointWorldModel)
+        return self.model.capabilities.keypoints
 
     @property
     def model_name(self) -> str:

@@ -1,9 +1,10 @@
 """KINet: keypoint detector and reconstruction, probabilistic graph forward model, losses, and
-its model env and push planner for goal-conditioned control."""
+its world model for planning and the push planner for goal-conditioned control."""
 
 from __future__ import annotations
 
 from kinet_rl.atomic import CheckpointError
+from kinet_rl.models.imagination import KEYPOINT_OBJECTIVES, keypoint_graph_world_model
 from kinet_rl.models.interaction import (
     GraphPrediction,
     KeypointInteractionNet,
@@ -12,35 +13,17 @@ from kinet_rl.models.interaction import (
 )
 from kinet_rl.models.keypoints import KeypointDetector, KeypointReconstructor
 from kinet_rl.models.losses import KINetLoss, graph_info_nce
-from kinet_rl.models.model_env import (
-    REWARDS,
-    GraphDistanceReward,
-    GraphSimilarityReward,
-    KeypointChamferReward,
-    KeypointDistanceReward,
-    KeypointL2Reward,
-    KINetModelEnv,
-    KINetReward,
-    chamfer_distance,
-)
 from kinet_rl.models.pretrained import model_card, pretrained_names
 from kinet_rl.models.push_planner import Push, PushPlanner
 from kinet_rl.models.transforms import KeypointTransform
 from kinet_rl.models.world_model import KINetWorldModel, TransitionOutputs
 
 __all__ = [
-    "REWARDS",
+    "KEYPOINT_OBJECTIVES",
     "CheckpointError",
-    "GraphDistanceReward",
     "GraphPrediction",
-    "GraphSimilarityReward",
     "KINetLoss",
-    "KINetModelEnv",
-    "KINetReward",
     "KINetWorldModel",
-    "KeypointChamferReward",
-    "KeypointDistanceReward",
-    "KeypointL2Reward",
     "KeypointDetector",
     "KeypointInteractionNet",
     "KeypointReconstructor",
@@ -48,10 +31,10 @@ __all__ = [
     "Push",
     "PushPlanner",
     "TransitionOutputs",
-    "chamfer_distance",
     "edge_geometry",
     "graph_info_nce",
     "graph_similarity",
+    "keypoint_graph_world_model",
     "model_card",
     "pretrained_names",
 ]

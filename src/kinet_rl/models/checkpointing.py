@@ -2,9 +2,11 @@
 
 A model that mixes in :class:`ConfigCheckpointMixin` keeps its constructor arguments in
 ``self.config`` and names its file format in ``checkpoint_format``; the mixin writes weights,
-config and the scene the model was trained on (typed :class:`~kinet_rl.envs.SceneSettings`)
-atomically and rebuilds the model from them (``weights_only=True``), refusing files of another
-model or with settings other than the caller expects.
+config, the scene the model was trained on (typed :class:`~kinet_rl.envs.SceneSettings`: image
+size and workspace) and its planning defaults (:class:`~kinet_rl.planners.PlanningDefaults`, the
+objective and budget chosen on validation episodes) atomically and rebuilds the model from them
+(``weights_only=True``), refusing files of another model or with settings other than the caller
+expects. A loaded model carries ``scene`` and ``planning``.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from torch import nn
 
 from kinet_rl.atomic import CheckpointError, atomic_torch_save, safe_torch_load
 from kinet_rl.envs.settings import SceneSettings
+from kinet_rl.planners.world_model import PlanningDefaults
 
 log = logging.getLogger(__name__)
 
@@ -31,15 +34,24 @@ class ConfigCheckpointMixin:
     """
 
     checkpoint_format: ClassVar[str]
+    #: File name of the trained model in a run directory.
+    model_file: ClassVar[str] = "model.pt"
     config: dict[str, Any]
+    #: The planning objective and budget (class default; a checkpoint's own once loaded).
+    planning: PlanningDefaults
+    #: The scene it was trained on (None until saved or loaded with one).
+    scene: SceneSettings | None = None
 
     def save_checkpoint(self, path: str | os.PathLike, scene: SceneSettings | None = None) -> None:
-        """Atomically writes weights, the constructor config and the ``scene`` trained on."""
+        """Atomically writes weights, the constructor config, the ``scene`` trained on (default:
+        ``self.scene``) and the planning defaults."""
         assert isinstance(self, nn.Module)
+        scene = self.scene if scene is None else scene
         state = {
             "format": self.checkpoint_format,
             "model_config": dict(self.config),
             "scene": None if scene is None else scene.as_dict(),
+            "planning": self.planning.as_dict(),
             "state_dict": self.state_dict(),
         }
         atomic_torch_save(state, path)
@@ -85,11 +97,16 @@ class ConfigCheckpointMixin:
             model = cls(**stored)
             assert isinstance(model, nn.Module)
             model.load_state_dict(state["state_dict"])
-        except (TypeError, RuntimeError) as err:
+            planning = state.get("planning")
+            if planning is not None:
+                model.planning = PlanningDefaults.from_mapping(planning)
+        except (TypeError, RuntimeError, KeyError, ValueError) as err:
             raise CheckpointError(
                 f"Checkpoint {path} holds weights that do not fit its model config ({err}); "
                 "the file was edited or written by an incompatible version, re-save it."
             ) from err
+        scene = state.get("scene")
+        model.scene = None if scene is None else SceneSettings.from_mapping(scene)
         return model
 
 

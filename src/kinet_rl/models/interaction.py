@@ -13,7 +13,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from kinet_rl.planners.model_env import ACTION_DIM
+from kinet_rl.planners.world_model import ACTION_DIM
 
 #: Frames in which the push's points enter the node update (see :class:`KeypointInteractionNet`).
 ACTION_FRAMES = ("table", "learned")
@@ -344,6 +344,7 @@ class KeypointInteractionNet(nn.Module):
             nn.init.eye_(self.action_to_image.weight)
             nn.init.zeros_(self.action_to_image.bias)
         self.feat_dim = feat_dim
+        self.embed_dim = embed_dim
         self.num_rounds = num_rounds
         self.deterministic = deterministic
         self.node_encoder = mlp(feat_dim + 2, embed_dim, hidden_dim, num_hidden)

@@ -26,8 +26,6 @@ class KeypointWorldModel(nn.Module):
     """
 
     label: ClassVar[str]
-    #: Trains on episodes of different object counts (it learns from pixels and pushes only).
-    variable_object_count: ClassVar[bool] = True
     detector: KeypointDetector
     reconstructor: KeypointReconstructor
 

@@ -1,20 +1,22 @@
-"""Goal-conditioned push planning from camera images, for a real robot or the simulator."""
+"""Goal-conditioned push planning with any model that plans, for a real robot or the simulator."""
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import torch
+from tensordict import TensorDict, TensorDictBase
 from torch import Tensor
 
-from kinet_rl.keys import ACTION, GOAL_KP_POS, KP_POS
-from kinet_rl.models.model_env import GraphDistanceReward, KINetModelEnv, KINetReward
-from kinet_rl.models.world_model import KINetWorldModel
+from kinet_rl.envs.settings import SceneSettings
+from kinet_rl.envs.workspace import workspace_for
+from kinet_rl.keys import ACTION, GOAL_KP_POS, GOAL_PIXELS, KP_POS, PIXELS
 from kinet_rl.planners.graph_mpc import GraphMPCPlanner
+from kinet_rl.planners.world_model import PlanningInterface, PushWorldModelEnv
 
 logger = logging.getLogger(__name__)
 
@@ -58,49 +60,64 @@ def as_image_tensor(image: np.ndarray | Tensor, name: str = "image") -> Tensor:
 
 
 class PushPlanner:
-    """Plans the next push that brings the scene in ``image`` towards the one in ``goal_image``.
+    """Plans the next push that brings the scene towards a goal, with any model that plans.
 
-    Wraps a :class:`GraphMPCPlanner` over a :class:`KINetModelEnv`; the planner's warm start
-    (its previous plan shifted by one) is kept between calls and cleared when the goal image
-    changes or :meth:`reset` is called. Images must come from the camera, view and resolution
-    the model was trained on. :meth:`next_pushes` plans for several scenes at once (one batched
-    planner call; each scene keeps its own warm start).
+    Builds the model's ``torchrl.modules.WorldModel`` for its planning objective, wraps it in a
+    :class:`~kinet_rl.planners.PushWorldModelEnv` and plans over it with a
+    :class:`GraphMPCPlanner`. With no other argument it plans as the model's results were
+    produced: the objective and planner settings stored with the model (``model.planning``,
+    from its checkpoint) and the workspace of the scene it was trained on (``model.scene``).
+    The planner's warm start (its previous plan shifted by one) is kept between calls and
+    cleared when the goal changes or :meth:`reset` is called. :meth:`next_pushes` plans for
+    several scenes at once (one batched planner call; each scene keeps its own warm start).
 
     Example:
-        >>> planner = PushPlanner(KINetWorldModel.from_checkpoint("runs/x/kinet.pt"), 0.20)
+        >>> planner = PushPlanner(KINetWorldModel.from_checkpoint("runs/x/kinet.pt"))
         >>> push = planner.next_push(camera_image, goal_image)  # doctest: +SKIP
         >>> robot.push(push.start_xy_m, push.end_xy_m)  # doctest: +SKIP
 
     Args:
-        model: A trained KINet world model.
-        workspace_half_size: Half the side of the square workspace, metres (0.20 blocks, 0.30 YCB).
-        reward: The planning objective (default :class:`GraphDistanceReward`, GraphMPC on the
-            node-embedding distance); see :class:`KINetModelEnv`.
+        model: A trained model (KINet, a baseline, the oracle: any ``PlanningInterface``).
+        objective: Planning objective (default ``model.planning.objective``); one of
+            ``model.capabilities.objectives``.
+        planner: All :class:`GraphMPCPlanner` settings (default ``model.planning.planner``).
+        workspace_half_size: Half the side of the square workspace, metres (default: that of
+            ``model.scene``'s task; 0.20 blocks, 0.30 YCB).
         seed: Seeds the planner's sampling for reproducible pushes (None: global torch RNG); a
             sequence of seeds, one per scene of :meth:`next_pushes`, samples for each scene what
             a planner seeded with its seed alone would.
-        **planner_kwargs: :class:`GraphMPCPlanner` settings (``planning_horizon``, ...).
     """
 
     def __init__(
         self,
-        model: KINetWorldModel,
-        workspace_half_size: float,
-        reward: KINetReward | None = None,
+        model: PlanningInterface,
+        objective: str | None = None,
+        planner: Mapping[str, Any] | None = None,
+        workspace_half_size: float | None = None,
         seed: int | Sequence[int] | None = None,
-        **planner_kwargs: Any,
     ) -> None:
+        scene: SceneSettings | None = model.scene
+        if workspace_half_size is None:
+            if scene is None:
+                raise ValueError(
+                    "The model does not say which scene it was trained on (it was not loaded from "
+                    "a checkpoint); pass workspace_half_size= in metres (0.20 blocks, 0.30 YCB)."
+                )
+            workspace_half_size = workspace_for(scene.task).half_size
         if not workspace_half_size > 0:
             raise ValueError(f"workspace_half_size must be > 0 metres, got {workspace_half_size}.")
-        model.eval()
-        self.env = KINetModelEnv(model, GraphDistanceReward() if reward is None else reward)
+        self.objective = objective or model.planning.objective
+        self.settings = dict(model.planning.planner if planner is None else planner)
+        self.capabilities = model.capabilities
+        self.image_size = None if scene is None else scene.image_size
+        self.world_model = model.world_model(self.objective)
+        self.env = PushWorldModelEnv(self.world_model)
         self.planner = GraphMPCPlanner(
-            self.env, generator=seeded_generators(seed, self.env.device), **planner_kwargs
+            self.env, generator=seeded_generators(seed, self.env.device), **self.settings
         )
         self.workspace_half_size = float(workspace_half_size)
         self._goal: Tensor | None = None
-        self.last_keypoints: Tensor | None = None  # [*B, K, 2] detected in the last image(s)
-        self.last_goal_keypoints: Tensor | None = None  # [*B, K, 2] detected in the goal image(s)
+        self.last_state: TensorDictBase | None = None  # the encoded start state of the last plan
 
     def reset(self) -> None:
         """Forgets the warm-start plan (call at the start of a new task)."""
@@ -110,10 +127,15 @@ class PushPlanner:
         """The next push for the current ``image`` and the ``goal_image`` (both uint8 ``[H, W, 3]``)."""
         image = as_image_tensor(image, "image")
         goal = as_image_tensor(goal_image, "goal_image")
-        return self._plan(image, goal)[0]
+        return self.next_pushes(image.unsqueeze(0), goal.unsqueeze(0))[0]
 
     def next_pushes(self, images: Tensor, goal_images: Tensor) -> list[Push]:
         """The next push of each scene: ``images`` and ``goal_images`` uint8 ``[B, H, W, 3]``."""
+        if not self.capabilities.plans_from_images:
+            raise TypeError(
+                f"This model plans from {list(self.capabilities.observes)}, not from images alone; "
+                "call plan() with a tensordict of those entries and the goal."
+            )
         for name, batch in (("images", images), ("goal_images", goal_images)):
             if batch.dim() != 4:
                 raise ValueError(
@@ -121,26 +143,58 @@ class PushPlanner:
                     f"{tuple(batch.shape)}; use next_push for one image."
                 )
             as_image_tensor(batch[0], name)
-        return self._plan(images, goal_images)
-
-    def _plan(self, images: Tensor, goals: Tensor) -> list[Push]:
-        if self._goal is None or not torch.equal(self._goal, goals):
+        check_image_sizes(images[0], goal_images[0], self.image_size)
+        if self._goal is None or not torch.equal(self._goal, goal_images):
             if self._goal is not None:
                 logger.info("PushPlanner: new goal image; warm start cleared.")
             self.planner.reset()
-            self._goal = goals.clone()
-        state = self.env.observe(images, goals)
-        self.last_keypoints = state.get(KP_POS).cpu()
-        self.last_goal_keypoints = state.get(GOAL_KP_POS).cpu()
-        actions = self.planner(state).get(ACTION).cpu().double().clamp(-1.0, 1.0)
-        return [self._push(action) for action in actions.reshape(-1, 4)]
+            self._goal = goal_images.clone()
+        observation = TensorDict(
+            {PIXELS: images, GOAL_PIXELS: goal_images}, batch_size=images.shape[:1]
+        )
+        return [self._push(action) for action in self.plan(observation)]
+
+    def plan(self, observation: TensorDictBase) -> Tensor:
+        """Normalised pushes ``[*B, 4]`` for a ``[*B]`` tensordict of the model's observation and
+        goal entries (``capabilities.observes`` and ``capabilities.goal``)."""
+        state = self.world_model.observe(observation)
+        self.last_state = state.cpu()
+        return self.planner(state).get(ACTION).cpu()
+
+    @property
+    def last_keypoints(self) -> Tensor | None:
+        """``[*B, K, 2]`` keypoints detected in the last image(s), for keypoint models."""
+        return None if self.last_state is None else self.last_state.get(KP_POS, None)
+
+    @property
+    def last_goal_keypoints(self) -> Tensor | None:
+        """``[*B, K, 2]`` keypoints detected in the goal image(s), for keypoint models."""
+        return None if self.last_state is None else self.last_state.get(GOAL_KP_POS, None)
 
     def _push(self, action: Tensor) -> Push:
+        action = action.double().clamp(-1.0, 1.0)
         metres = (action * self.workspace_half_size).tolist()
         return Push(
             start_xy_m=(metres[0], metres[1]),
             end_xy_m=(metres[2], metres[3]),
             normalised=tuple(action.tolist()),  # type: ignore[arg-type]
+        )
+
+
+def check_image_sizes(image: Tensor, goal: Tensor, model_size: int | None) -> None:
+    """Raises a ValueError naming both sizes if ``image`` ``[H, W, 3]`` is not the model's
+    square size or ``goal`` is not the image's size."""
+    height, width = image.shape[:2]
+    if model_size is not None and (height, width) != (model_size, model_size):
+        raise ValueError(
+            f"The image is {width}x{height} px but the model was trained on {model_size}x"
+            f"{model_size} px images; pass images of the model's camera and size (the command "
+            "line resizes only when asked: --resize)."
+        )
+    if goal.shape != image.shape:
+        raise ValueError(
+            f"The goal image is {goal.shape[1]}x{goal.shape[0]} px but the current image is "
+            f"{width}x{height} px; they must have the same size."
         )
 
 

@@ -17,6 +17,7 @@ from kinet_rl.keys import (
     ACTION,
     FUTURE_ACTION,
     FUTURE_PIXELS,
+    GOAL_PIXELS,
     KP_FEAT,
     KP_NODE_EMB,
     KP_POS,
@@ -25,10 +26,17 @@ from kinet_rl.keys import (
     PIXELS_0,
 )
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
+from kinet_rl.models.imagination import KEYPOINT_OBJECTIVES, keypoint_graph_world_model
 from kinet_rl.models.interaction import GraphPrediction, KeypointInteractionNet
 from kinet_rl.models.keypoint_model import KeypointWorldModel
 from kinet_rl.models.keypoints import KeypointDetector, KeypointReconstructor, pixels_to_input
 from kinet_rl.models.pretrained import pretrained_path
+from kinet_rl.planners.world_model import (
+    ModelCapabilities,
+    PlanningDefaults,
+    PushWorldModel,
+    check_objective,
+)
 
 log = logging.getLogger(__name__)
 
@@ -96,7 +104,19 @@ class KINetWorldModel(ConfigCheckpointMixin, KeypointWorldModel):
     """
 
     checkpoint_format = CHECKPOINT_FORMAT
+    model_file = "kinet.pt"
     label = "KINet"
+    capabilities = ModelCapabilities(
+        observes=(PIXELS,),
+        goal=(GOAL_PIXELS,),
+        objectives=KEYPOINT_OBJECTIVES,
+        any_object_count=True,
+        reconstructs=True,
+        keypoints=True,
+    )
+    #: Index-matched keypoint L2 at the validated budget: chosen on validation episodes
+    #: (docs/results.md); a checkpoint stores its own.
+    planning = PlanningDefaults("keypoints_l2")
 
     def __init__(
         self,
@@ -141,6 +161,12 @@ class KINetWorldModel(ConfigCheckpointMixin, KeypointWorldModel):
         """A model shipped with the package (:func:`~kinet_rl.models.pretrained.pretrained_names`;
         its card: :func:`~kinet_rl.models.pretrained.model_card`), in eval mode."""
         return cls.from_checkpoint(pretrained_path(name)).eval()
+
+    def world_model(self, objective: str | None = None, fast: bool = True) -> PushWorldModel:
+        """KINet as a ``torchrl.modules.WorldModel`` planning with ``objective`` (default: its
+        ``planning.objective``); see :func:`~kinet_rl.models.imagination.keypoint_graph_world_model`."""
+        name = check_objective(self.capabilities, objective or self.planning.objective, self.label)
+        return keypoint_graph_world_model(self.detector, self.interaction, name, fast)
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         """Predicts the next keypoints for ``ACTION`` (see the class ``Keys:``)."""

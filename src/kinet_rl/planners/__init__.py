@@ -1,4 +1,5 @@
-"""Planners over any TorchRL model env: GraphMPC (CEM, MPPI), goal rewards, a model-env base.
+"""Planning over any world model of pushes: the world-model interface and its TorchRL
+``WorldModelEnv``, the goal objectives, GraphMPC (CEM, MPPI).
 
 Imports neither ``kinet_rl.models`` nor hydra, so any TorchRL pipeline can use it with its own
 world model.
@@ -6,14 +7,36 @@ world model.
 
 from __future__ import annotations
 
-from kinet_rl.planners.costs import GoalReward, graph_similarity_reward, keypoint_goal_reward
 from kinet_rl.planners.graph_mpc import GraphMPCPlanner
-from kinet_rl.planners.model_env import StateModelEnv
+from kinet_rl.planners.objectives import (
+    OBJECTIVES,
+    GoalObjective,
+    chamfer_distance,
+    goal_objective,
+    goal_reward_head,
+)
+from kinet_rl.planners.world_model import (
+    VALIDATED_PLANNER,
+    ModelCapabilities,
+    PlanningDefaults,
+    PlanningInterface,
+    PushWorldModel,
+    PushWorldModelEnv,
+    push_dynamics,
+)
 
 __all__ = [
-    "GoalReward",
+    "OBJECTIVES",
+    "VALIDATED_PLANNER",
+    "GoalObjective",
     "GraphMPCPlanner",
-    "StateModelEnv",
-    "graph_similarity_reward",
-    "keypoint_goal_reward",
+    "ModelCapabilities",
+    "PlanningDefaults",
+    "PlanningInterface",
+    "PushWorldModel",
+    "PushWorldModelEnv",
+    "chamfer_distance",
+    "goal_objective",
+    "goal_reward_head",
+    "push_dynamics",
 ]

@@ -63,7 +63,7 @@ class GraphMPCPlanner(MPCPlannerBase):
         Reads the input tensordict (``[*B]``) as the env's start state; the env sees it as a
         broadcast view ``[*B, N]`` (stride 0 over the candidates, so the env must not write its
         entries in place), from which it may compute what does not depend on the action once
-        (``KINetModelEnv`` does). Writes ``action_key`` ``[*B, *A]``.
+        (KINet's world model does). Writes ``action_key`` ``[*B, *A]``.
 
     Args:
         env: Model env with ``batch_locked=False`` and a continuous action spec.

@@ -7,12 +7,7 @@ Dependency order inside the package: ``settings`` <- ``results`` <- ``episodes``
 
 from __future__ import annotations
 
-from kinet_rl.rearrangement.controllers import (
-    BaselineMPCController,
-    KINetController,
-    OracleController,
-    RandomController,
-)
+from kinet_rl.rearrangement.controllers import PlannerController, RandomController
 from kinet_rl.rearrangement.episodes import (
     Controller,
     Episode,
@@ -33,15 +28,13 @@ from kinet_rl.rearrangement.settings import (
 
 __all__ = [
     "METHODS",
-    "BaselineMPCController",
     "Condition",
     "Controller",
     "Episode",
     "EpisodeResult",
-    "KINetController",
     "Method",
     "MethodContext",
-    "OracleController",
+    "PlannerController",
     "RandomController",
     "RearrangementResults",
     "RearrangementSettings",

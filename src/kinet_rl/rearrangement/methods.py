@@ -1,51 +1,34 @@
 """The methods of the rearrangement evaluation: one declaration each, with label and controller.
 
 A method's controller factory gets a :class:`MethodContext` (the model, the episodes' scene, the
-settings and the episode seeds: one controller plans for a batch of episodes). ``needs`` says
-which model a method plans with: ``"kinet"`` (a :class:`~kinet_rl.models.KINetWorldModel`), ``"baseline"`` (IN, IN-full, VisIN, Forw, ForwInv or V-CDN) or
-``None`` (random pushes and the oracle need no model).
+settings and the episode seeds: one controller plans for a batch of episodes). A planning method
+plans with the model through a :class:`~kinet_rl.models.PushPlanner` and a planning objective:
+``kinet_<objective>`` with that objective of :data:`~kinet_rl.planners.OBJECTIVES` (any model
+that declares it: KINet's graph and keypoint objectives), ``model_mpc`` with the model's own
+(a baseline's distance to the goal). Random pushes and the oracle need no model.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Literal, cast
 
-from torch import nn
-
+from kinet_rl.baselines.oracle import AnalyticPushModel
 from kinet_rl.envs.settings import SceneSettings
 from kinet_rl.envs.workspace import workspace_for
-from kinet_rl.keys import OBJECT_POS, OBJECT_SHAPE, OBJECT_YAW, PIXELS
-from kinet_rl.models.model_env import (
-    GraphDistanceReward,
-    GraphSimilarityReward,
-    KeypointChamferReward,
-    KeypointDistanceReward,
-    KeypointL2Reward,
-    KINetReward,
-)
+from kinet_rl.keys import OBJECT_POS
 from kinet_rl.models.push_planner import PushPlanner
-from kinet_rl.models.world_model import KINetWorldModel
-from kinet_rl.rearrangement.controllers import (
-    BaselineMPCController,
-    KINetController,
-    OracleController,
-    RandomController,
-)
+from kinet_rl.planners.world_model import ModelCapabilities, PlanningDefaults, PlanningInterface
+from kinet_rl.rearrangement.controllers import PlannerController, RandomController
 from kinet_rl.rearrangement.episodes import Controller
 from kinet_rl.rearrangement.settings import Condition, RearrangementSettings
-
-ModelKind = Literal["kinet", "baseline"] | None
-#: What a camera gives: the observation of every controller that plans from images.
-IMAGES = (PIXELS,)
 
 
 @dataclass(frozen=True)
 class MethodContext:
     """What a controller factory is given for a batch of episodes of one scene."""
 
-    model: nn.Module | None
+    model: PlanningInterface | None
     scene: SceneSettings
     settings: RearrangementSettings
     seeds: tuple[int, ...]
@@ -58,34 +41,45 @@ class Method:
     Attributes:
         name: Its key in settings, summaries and JSON.
         label: How reports and tables name it.
-        needs: The model it plans with (see the module docstring).
+        plans_with_model: Whether it plans with the evaluated model.
+        objective: The planning objective of a model method (None: the model's own).
         make_controller: Builds its controller for a batch of episodes.
-        observes: The observation entries its controller is handed each step: learned-model
-            controllers see only what a real robot's camera gives (``pixels``); the GT-state
-            baselines also get ``object_pos``, ``object_yaw`` and ``object_shape``, the oracle
-            ``object_pos``.
+        observes: The observation entries its controller is handed each step, for methods
+            without a model (random: none; the oracle: ``object_pos``); a model method's
+            controller is handed what the model declares (``capabilities.observes``): camera
+            images for KINet, Forw, ForwInv and V-CDN, ground-truth state for IN, IN-full, VisIN.
     """
 
     name: str
     label: str
-    needs: ModelKind
+    plans_with_model: bool
+    objective: str | None
     make_controller: Callable[[MethodContext], Controller]
-    observes: tuple[str, ...]
+    observes: tuple[str, ...] = ()
 
-    def check_model(self, model: nn.Module | None) -> None:
-        """Raises ``ValueError``/``TypeError`` naming the problem if this method cannot use ``model``."""
-        if self.needs is not None and model is None:
+    def plans_with(self, capabilities: ModelCapabilities) -> bool:
+        """Whether this method can plan with a model that declares ``capabilities``."""
+        return self.objective is None or self.objective in capabilities.objectives
+
+    def check_model(self, model: PlanningInterface | None) -> None:
+        """Raises ``ValueError`` naming the problem if this method cannot use ``model``."""
+        if not self.plans_with_model:
+            return
+        if model is None:
             raise ValueError(f"Methods {[self.name]} need a model; pass model= or drop them.")
-        if self.needs == "kinet" and not isinstance(model, KINetWorldModel):
-            raise TypeError(
-                f"Method {self.name!r} plans with KINet, got a {type(model).__name__}; use method "
-                "'model_mpc' for baseline models."
+        objectives = model.capabilities.objectives
+        if not self.plans_with(model.capabilities):
+            raise ValueError(
+                f"Method {self.name!r} plans with the objective {self.objective!r}, which a "
+                f"{type(model).__name__} does not declare (it plans with {list(objectives)}); use "
+                "method 'model_mpc' for a model's own objective."
             )
-        if self.needs == "baseline" and isinstance(model, KINetWorldModel):
-            raise TypeError(
-                f"Method {self.name!r} plans with a baseline model (IN, VisIN, Forw, ForwInv or "
-                "V-CDN), got KINet; use a kinet_* method."
-            )
+
+    def observed(self, model: PlanningInterface | None) -> tuple[str, ...]:
+        """The observation entries this method's controller is handed."""
+        if self.plans_with_model and model is not None:
+            return model.capabilities.observes
+        return self.observes
 
     def controller(self, ctx: MethodContext) -> Controller:
         """The method's controller for the context's episodes, after checking the model."""
@@ -93,84 +87,85 @@ class Method:
         return self.make_controller(ctx)
 
 
-def _kinet(reward: Callable[[], KINetReward]) -> Callable[[MethodContext], Controller]:
+def _planning(objective: str | None) -> Callable[[MethodContext], Controller]:
     def make(ctx: MethodContext) -> Controller:
-        half_size = workspace_for(ctx.scene.task).half_size
-        model = cast(KINetWorldModel, ctx.model)  # Method.controller checked it
-        planner = PushPlanner(
-            model, half_size, reward=reward(), seed=ctx.seeds, **dict(ctx.settings.planner)
-        )
-        return KINetController(planner)
+        assert ctx.model is not None  # Method.controller checked it
+        return _planner_controller(ctx.model, objective, ctx)
 
     return make
 
 
+def _planner_controller(
+    model: PlanningInterface, objective: str | None, ctx: MethodContext
+) -> Controller:
+    half_size = workspace_for(ctx.scene.task).half_size
+    planner = PushPlanner(
+        model, objective, dict(ctx.settings.planner), workspace_half_size=half_size, seed=ctx.seeds
+    )
+    return PlannerController(planner)
+
+
 def _oracle(ctx: MethodContext) -> Controller:
-    settings = ctx.settings
-    return OracleController(ctx.scene, settings.planner, settings.oracle_contact_radius, ctx.seeds)
+    half_size = workspace_for(ctx.scene.task).half_size
+    oracle = AnalyticPushModel(ctx.scene.num_objects, half_size, ctx.settings.oracle_contact_radius)
+    return _planner_controller(oracle, None, ctx)
+
+
+def _kinet(objective: str, label: str) -> Method:
+    return Method(f"kinet_{objective}", label, True, objective, _planning(objective))
 
 
 METHODS: dict[str, Method] = {
     method.name: method
     for method in (
+        _kinet("graph", "KINet-GraphMPC (paper S, cosine)"),
+        _kinet("graph_dot", "KINet-GraphMPC (paper S, dot product)"),
+        _kinet("graph_distance", "KINet-GraphMPC (embedding distance)"),
+        _kinet("keypoints", "MPC on keypoint positions"),
+        _kinet("keypoints_l2", "MPC on index-matched keypoint positions (L2)"),
+        _kinet("keypoints_distance", "MPC on index-matched keypoint distances (not squared)"),
+        Method("random", "Random pushes", False, None, lambda ctx: RandomController(ctx.seeds)),
         Method(
-            "kinet_graph",
-            "KINet-GraphMPC (paper S, cosine)",
-            "kinet",
-            _kinet(GraphSimilarityReward),
-            IMAGES,
-        ),
-        Method(
-            "kinet_graph_dot",
-            "KINet-GraphMPC (paper S, dot product)",
-            "kinet",
-            _kinet(lambda: GraphSimilarityReward("dot")),
-            IMAGES,
-        ),
-        Method(
-            "kinet_graph_distance",
-            "KINet-GraphMPC (embedding distance)",
-            "kinet",
-            _kinet(GraphDistanceReward),
-            IMAGES,
-        ),
-        Method(
-            "kinet_keypoints",
-            "MPC on keypoint positions",
-            "kinet",
-            _kinet(KeypointChamferReward),
-            IMAGES,
-        ),
-        Method(
-            "kinet_keypoints_l2",
-            "MPC on index-matched keypoint positions (L2)",
-            "kinet",
-            _kinet(KeypointL2Reward),
-            IMAGES,
-        ),
-        Method(
-            "kinet_keypoints_distance",
-            "MPC on index-matched keypoint distances (not squared)",
-            "kinet",
-            _kinet(KeypointDistanceReward),
-            IMAGES,
-        ),
-        Method("random", "Random pushes", None, lambda ctx: RandomController(ctx.seeds), ()),
-        Method(
-            "oracle", "Oracle MPC (GT state, analytic push model)", None, _oracle, (OBJECT_POS,)
+            "oracle",
+            "Oracle MPC (GT state, analytic push model)",
+            False,
+            None,
+            _oracle,
+            (OBJECT_POS,),
         ),
         Method(
             "model_mpc",
             "Baseline model MPC (distance to goal)",
-            "baseline",
-            lambda ctx: BaselineMPCController(
-                cast(nn.Module, ctx.model), ctx.settings.planner, ctx.seeds
-            ),
-            # IN/IN-full/VisIN plan on GT state (Forw/ForwInv/V-CDN: pixels only)
-            (PIXELS, OBJECT_POS, OBJECT_YAW, OBJECT_SHAPE),
+            True,
+            None,
+            _planning(None),
         ),
     )
 }
+
+
+def method_for_objective(objective: str) -> str:
+    """The method that plans with ``objective``: ``kinet_<objective>``, or ``model_mpc`` for a
+    model's own distance to the goal (a baseline's)."""
+    name = f"kinet_{objective}"
+    return name if name in METHODS else "model_mpc"
+
+
+def plans_every_method(capabilities: ModelCapabilities, settings: RearrangementSettings) -> bool:
+    """Whether a model that declares ``capabilities`` can plan every method of ``settings``."""
+    return all(METHODS[name].plans_with(capabilities) for name in settings.methods)
+
+
+def validated_planning(
+    model: PlanningInterface, settings: RearrangementSettings
+) -> PlanningDefaults:
+    """The planning defaults an experiment stores with its model: the objective of its
+    ``kinet_method`` (chosen on validation episodes) where the model declares it, else the
+    model's own, with the evaluation's planner settings."""
+    objective = METHODS[settings.kinet_method].objective
+    if objective is None or objective not in model.capabilities.objectives:
+        objective = model.planning.objective
+    return PlanningDefaults(objective, dict(settings.planner))
 
 
 def check_methods(settings: RearrangementSettings) -> None:
@@ -178,7 +173,7 @@ def check_methods(settings: RearrangementSettings) -> None:
     unknown = [m for m in settings.methods if m not in METHODS]
     if unknown:
         raise ValueError(f"Unknown methods {unknown}; choose from {list(METHODS)}.")
-    model_methods = [m.name for m in METHODS.values() if m.needs is not None]
+    model_methods = [m.name for m in METHODS.values() if m.plans_with_model]
     if settings.kinet_method not in model_methods:
         raise ValueError(
             f"kinet_method={settings.kinet_method!r}; choose one of {model_methods} (a KINet "
@@ -186,7 +181,7 @@ def check_methods(settings: RearrangementSettings) -> None:
         )
 
 
-def check_model(conditions: Iterable[Condition], model: nn.Module | None) -> None:
+def check_model(conditions: Iterable[Condition], model: PlanningInterface | None) -> None:
     """Raises before any episode runs if a method of ``conditions`` cannot plan with ``model``."""
     for name in sorted({name for condition in conditions for name in condition.methods}):
         METHODS[name].check_model(model)

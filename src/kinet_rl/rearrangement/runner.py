@@ -96,7 +96,7 @@ def run_jobs(
             method_name,
             settings.task,
             record=[job.record for job in jobs],
-            observes=method.observes,
+            observes=method.observed(model),
         )
     finally:
         for episode in episodes:

@@ -46,7 +46,7 @@ def fingerprint(settings: RearrangementSettings, model: torch.nn.Module | None) 
     shaping = {k: v for k, v in settings.as_dict().items() if k not in SELECTION_SETTINGS}
     digest = hashlib.sha256(json.dumps(shaping, sort_keys=True).encode())
     if model is not None:
-        config = getattr(model, "config", {})
+        config = model.config
         digest.update(f"{type(model).__qualname__}{json.dumps(config, sort_keys=True)}".encode())
         for name, tensor in model.state_dict().items():
             digest.update(name.encode())

@@ -1,6 +1,7 @@
-"""A tiny synthetic pushing dataset (coloured squares) with the kinet_rl dataset API.
+"""A tiny synthetic pushing dataset (coloured squares) with the kinet_rl dataset API, for the
+baselines' tests (its own tests: ``unit/test_baselines_toy_pushing.py``).
 
-For fast tests and smoke runs of forward models, without MuJoCo stepping or rendering: squares
+For fast tests of forward models, without MuJoCo stepping or rendering: squares
 of fixed colours (one per object index) lie on a grey table seen by the blocks task's top camera;
 a push moves every square whose centre lies within ``object_half_size`` of the push line, ahead of
 the push start and within reach, along the push until the pusher's end point (no
