@@ -8,8 +8,8 @@ objects x train/gen geometry) and extra backgrounds, with settings from the ``ev
 logger of the ``logger`` group. The model is of the experiment's ``model`` group: a baseline's
 experiment names its methods (e.g. ``+exp=blocks_topview_vcdn`` plans with ``model_mpc``).
 Without ``checkpoint`` it uses the training run of the same experiment (``<run dir>/kinet.pt``,
-``model.pt`` for a baseline); ``checkpoint=pretrained:<name>`` uses a KINet shipped with the
-package.
+``model.pt`` for a baseline); ``checkpoint=<model folder>`` loads a ``save_pretrained`` folder
+and ``checkpoint=pretrained:<name>`` a KINet shipped with the package.
 
 The paper's protocol (1,000 test episodes, T = 40, 3 blocks, top camera) with the shipped model:
 ``python -m kinet_rl.evaluate +exp=blocks_topview checkpoint=pretrained:blocks_topview
@@ -56,7 +56,7 @@ def evaluate(cfg: DictConfig, run_dir: Path) -> dict[str, Any]:
     model_class = cast(type[ConfigCheckpointMixin], get_class(cfg.model._target_))
     default = run_dir / model_class.model_file
     checkpoint = resolve_checkpoint(cfg.get("checkpoint") or default)
-    if not checkpoint.is_file():
+    if not checkpoint.exists():
         raise FileNotFoundError(
             f"No checkpoint at {checkpoint}; train first (python -m kinet_rl.train +exp=...) or "
             f"pass checkpoint=<path to {default.name}> (or pretrained:<name>)."

@@ -84,8 +84,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--checkpoint",
         required=True,
-        help="kinet.pt of a run, or pretrained:<name> for a shipped model (e.g. "
-        "pretrained:blocks_topview)",
+        help="kinet.pt of a run, a model folder (save_pretrained), or pretrained:<name> for a "
+        "shipped model (e.g. pretrained:blocks_topview)",
     )
     parser.add_argument("--image", type=Path, nargs="+", required=True, help="current image(s)")
     parser.add_argument("--goal", type=Path, required=True, help="goal image")

@@ -3,7 +3,8 @@
 A :class:`Row` names a model of the comparison (KINet and its ablations, the baselines) with the
 experiment that trains it, its label, its model class and how its MPC rows plan. The tables,
 the comparison markdown and the entry points read rows from here; nothing else decides by model
-class. :func:`load_trained_model` loads any row's checkpoint by the format it stores.
+class. :func:`load_trained_model` loads any row's checkpoint (a ``.pt`` file or a model folder)
+by the format it stores.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import os
 from dataclasses import dataclass
 from typing import Any
 
-from kinet_rl.atomic import CheckpointError, safe_torch_load
+from kinet_rl.atomic import CheckpointError
 from kinet_rl.baselines import (
     FullStateInteractionModel,
     ImageForwardInverseModel,
@@ -21,7 +22,7 @@ from kinet_rl.baselines import (
     VCDNWorldModel,
     VisualInteractionModel,
 )
-from kinet_rl.models.checkpointing import ConfigCheckpointMixin
+from kinet_rl.models.checkpointing import ConfigCheckpointMixin, stored_entries
 from kinet_rl.models.world_model import KINetWorldModel
 
 
@@ -102,14 +103,16 @@ def row_of_model(model_class: type) -> Row:
 
 
 def load_trained_model(path: str | os.PathLike) -> Any:
-    """The model of any row's checkpoint (KINet or a baseline), chosen by the format it stores,
-    in eval mode."""
+    """The model of any row's checkpoint (KINet or a baseline), a ``.pt`` file or a model folder
+    (``save_pretrained``), chosen by the format it stores, in eval mode."""
     formats = {row.model.checkpoint_format: row.model for row in ROWS.values()}
-    state = safe_torch_load(path, ("format",), "save_checkpoint")
-    model_class = formats.get(state["format"])
+    stored = stored_entries(path)["format"]
+    model_class = formats.get(stored)
     if model_class is None:
         raise CheckpointError(
-            f"Checkpoint {path} has format {state['format']!r}, which no model of kinet_rl "
-            f"reads (formats: {sorted(formats)}); pass a kinet.pt or model.pt of a run."
+            f"Checkpoint {path} has format {stored!r}, which no model of kinet_rl reads "
+            f"(formats: {sorted(formats)}); pass a kinet.pt or model.pt of a run, or a model "
+            "folder."
         )
-    return model_class.from_checkpoint(path).eval()
+    model: Any = model_class.from_checkpoint(path)
+    return model.eval()

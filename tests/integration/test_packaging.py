@@ -35,7 +35,11 @@ def test_wheel_holds_every_config_and_module(tmp_path: Path) -> None:
     assert modules <= names, f"modules missing from the wheel: {sorted(modules - names)}"
     weights_dir = REPO / "src" / "kinet_rl" / "models" / "weights"
     weights = {p.relative_to(REPO / "src").as_posix() for p in _files(weights_dir)}
-    assert "kinet_rl/models/weights/blocks_topview.pt" in weights and weights <= names
+    shipped_model = {
+        f"kinet_rl/models/weights/blocks_topview/{name}"
+        for name in ("config.json", "model.safetensors", "README.md")
+    }
+    assert shipped_model <= weights and weights <= names
 
 
 def _files(folder: Path) -> list[Path]:

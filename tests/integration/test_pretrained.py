@@ -6,8 +6,8 @@ import json
 from pathlib import Path
 
 import pytest
-import torch
 from PIL import Image
+from safetensors.torch import load_file
 
 from kinet_rl import plan
 from kinet_rl.envs.settings import SceneSettings
@@ -30,7 +30,9 @@ def test_blocks_model_is_shipped() -> None:
 def test_shipped_model_loads_with_weights_only_and_reproduces_its_card(
     name: str, tmp_path: Path
 ) -> None:
-    torch.load(pretrained_path(name), weights_only=True)  # no pickled code in the file
+    folder = pretrained_path(name)
+    assert {p.name for p in folder.iterdir()} == {"config.json", "model.safetensors", "README.md"}
+    load_file(folder / "model.safetensors")  # tensors only: no pickled code in the folder
     card = model_card(name)
     assert set(card) >= CARD_FIELDS and card["name"] == name
     model = KINetWorldModel.from_pretrained(name)
@@ -44,6 +46,7 @@ def test_unknown_pretrained_name_lists_the_shipped_ones() -> None:
     with pytest.raises(ValueError, match="shipped: .*blocks_topview"):
         resolve_checkpoint("pretrained:no_such_model")
     assert resolve_checkpoint("runs/x/kinet.pt") == Path("runs/x/kinet.pt")
+    assert resolve_checkpoint("pretrained:blocks_topview") == pretrained_path("blocks_topview")
 
 
 def test_plan_cli_plans_with_a_shipped_model(tmp_path: Path, capsys) -> None:

@@ -19,9 +19,9 @@ from kinet_rl.evaluate import evaluate
 from kinet_rl.models.checkpointing import checkpoint_scene
 from kinet_rl.pipeline import evaluate_rearrangement
 from kinet_rl.rearrangement import runner
-from kinet_rl.rearrangement.controllers import RandomController
 from kinet_rl.rearrangement.episodes import make_episode, mean_goal_distance, run_episode
 from kinet_rl.rearrangement.methods import METHODS, MethodContext
+from kinet_rl.rearrangement.policies import RandomPolicy
 from kinet_rl.rearrangement.settings import RearrangementSettings, TaskSettings
 
 pytestmark = pytest.mark.slow
@@ -53,12 +53,12 @@ def test_oracle_mpc_beats_random_pushes_in_the_simulator() -> None:
         for method in finals:
             episode = make_episode(SCENE, task, seed)
             oracle = RearrangementSettings(scene=SCENE, planner=ORACLE, oracle_contact_radius=0.035)
-            controller = (
-                METHODS["oracle"].controller(MethodContext(None, SCENE, oracle, (seed,)))
+            policy = (
+                METHODS["oracle"].policy(MethodContext(None, SCENE, oracle, (seed,)))
                 if method == "oracle"
-                else RandomController([seed])
+                else RandomPolicy([seed])
             )
-            result = run_episode(episode, controller, method, task)
+            result = run_episode(episode, policy, method, task)
             episode.close()
             finals[method].append(result.distances[-1])
             final_ssim[method].append(result.goal_ssim[-1])
@@ -119,7 +119,7 @@ def test_evaluate_rearrangement_writes_plot_markdown_json_and_video_and_resumes(
 def test_plan_cli_prints_pushes_in_metres(tmp_path: Path, capsys, tiny_kinet) -> None:
     checkpoint = tmp_path / "kinet.pt"
     tiny_kinet().save_checkpoint(checkpoint, scene=SCENE)
-    assert checkpoint_scene(checkpoint) == SCENE  # the CLI resizes the 64 px goal to 32 px
+    assert checkpoint_scene(checkpoint) == SCENE  # --resize: the 64 px goal to 32 px
     episode = make_episode(SCENE, TaskSettings(), 0)
     try:
         Image.fromarray(episode.start["pixels"]).save(tmp_path / "now.png")
@@ -141,6 +141,7 @@ def test_plan_cli_prints_pushes_in_metres(tmp_path: Path, capsys, tiny_kinet) ->
             "2",
             "--top-k",
             "4",
+            "--resize",
         ]
     )
     lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
@@ -175,16 +176,19 @@ def test_evaluate_entry_point_composes_eval_group(tmp_path: Path, tiny_kinet, co
     assert (tmp_path / "rearrangement" / "rearrangement.md").is_file()
 
 
-def test_image_controllers_are_never_handed_ground_truth(monkeypatch, tiny_kinet) -> None:
-    """Every KINet method's controller sees only ``pixels``; the GT-state oracle sees positions."""
-    from kinet_rl.keys import OBJECT_POS, PIXELS
-    from kinet_rl.rearrangement.controllers import PlannerController
+def test_image_policies_are_never_handed_ground_truth(monkeypatch, tiny_kinet) -> None:
+    """Every KINet method's policy sees only images and goal images, though the episodes'
+    tensordict holds the simulator's object state; the GT-state oracle sees positions."""
+    from kinet_rl.keys import GOAL_OBJECT_POS, GOAL_PIXELS, OBJECT_POS, PIXELS
+    from kinet_rl.rearrangement.policies import PlannerPolicy
     from kinet_rl.rearrangement.runner import Job, run_jobs
 
-    seen: list[set[str]] = []
-    act = PlannerController.act
+    seen: list[set] = []
+    forward = PlannerPolicy.forward
     monkeypatch.setattr(
-        PlannerController, "act", lambda self, obs: seen.extend(map(set, obs)) or act(self, obs)
+        PlannerPolicy,
+        "forward",
+        lambda self, td: seen.append(set(td.keys(True, True))) or forward(self, td),
     )
     settings = RearrangementSettings(
         scene=SceneSettings(image_size=32), task=TaskSettings(num_steps=2), workers=1, videos=0,
@@ -194,10 +198,10 @@ def test_image_controllers_are_never_handed_ground_truth(monkeypatch, tiny_kinet
     kinet_methods = [name for name, method in METHODS.items() if method.objective is not None]
     for name in kinet_methods:
         run_jobs([Job(condition, name, 10_000, False)], settings, tiny_kinet())
-    assert seen == [{PIXELS}] * (2 * len(kinet_methods))
-    assert METHODS["oracle"].observed(None) == (OBJECT_POS,) and not METHODS["random"].observed(
-        None
-    )
+    assert seen == [{PIXELS, GOAL_PIXELS}] * (2 * len(kinet_methods))
+    seen.clear()
+    run_jobs([Job(condition, "oracle", 10_000, False)], settings, None)
+    assert seen == [{OBJECT_POS, GOAL_OBJECT_POS}] * 2
 
 
 def test_batched_episodes_run_as_they_do_one_at_a_time(tiny_kinet) -> None:

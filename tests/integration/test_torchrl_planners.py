@@ -19,19 +19,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from tensordict import TensorDict
-from tensordict.nn import TensorDictModule
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModule, TensorDictModuleBase
 from torch import nn
 from torchrl.modules import CEMPlanner, MPPIPlanner
 from torchrl.objectives.value import TDLambdaEstimator
 
 from kinet_rl.baselines import ObjectInteractionModel
 from kinet_rl.envs import SceneSettings
-from kinet_rl.keys import GOAL_OBJECT_POS, GOAL_PIXELS, PIXELS
 from kinet_rl.models import KINetWorldModel
 from kinet_rl.planners import PushWorldModelEnv
-from kinet_rl.rearrangement.controllers import RandomController, stacked
 from kinet_rl.rearrangement.episodes import make_episode, run_episodes
+from kinet_rl.rearrangement.policies import RandomPolicy
 from kinet_rl.rearrangement.settings import SPLIT_SEEDS, TaskSettings
 
 pytestmark = pytest.mark.slow
@@ -57,39 +56,34 @@ def torchrl_planner(kind: str, env: PushWorldModelEnv):
     return MPPIPlanner(env, advantage, temperature=20.0, **BUDGET)
 
 
-class TorchRLController:
-    """A model's world model, its WorldModelEnv and a torchrl planner: the observation entries
-    the model declares and the episodes' goals in, pushes out."""
+class TorchRLPolicy(TensorDictModuleBase):
+    """A model's world model, its WorldModelEnv and a torchrl planner as a rearrangement policy:
+    the observation and goal entries the model declares in, pushes out."""
 
     def __init__(self, model, kind: str) -> None:
-        self.model = model
+        super().__init__()
         self.world_model = model.world_model()
         self.planner = torchrl_planner(kind, PushWorldModelEnv(self.world_model))
-        self.goal: TensorDict | None = None
+        self.in_keys = [*model.capabilities.observes, *model.capabilities.goal]
+        self.out_keys = ["action"]
 
-    def reset(self, episodes) -> None:
-        goals = {
-            GOAL_PIXELS: lambda: torch.from_numpy(np.stack([e.goal_pixels for e in episodes])),
-            GOAL_OBJECT_POS: lambda: torch.as_tensor(np.stack([e.goal_pos for e in episodes])),
-        }
-        keys = self.model.capabilities.goal
-        self.goal = TensorDict({k: goals[k]() for k in keys}, batch_size=[len(episodes)])
+    def reset(self) -> None:
+        """torchrl's planners keep no warm start."""
 
-    def act(self, observations) -> np.ndarray:
-        observation = self.goal.clone(False)
-        for key in self.model.capabilities.observes:
-            dtype = None if key == PIXELS else torch.float32
-            observation.set(key, stacked(observations, key, dtype))
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        observation = tensordict.select(*self.in_keys).apply(
+            lambda value: value if value.dtype == torch.uint8 else value.float()
+        )
         with torch.no_grad():
             state = self.world_model.observe(observation)
-            return self.planner(state)["action"].numpy()
+            return tensordict.set("action", self.planner(state)["action"])
 
 
-def final_distances_mm(controller, scene: SceneSettings, observes) -> np.ndarray:
+def final_distances_mm(policy, scene: SceneSettings) -> np.ndarray:
     seeds = [SPLIT_SEEDS["validation"] + i for i in range(EPISODES)]
     episodes = [make_episode(scene, TASK, seed) for seed in seeds]
     try:
-        results = run_episodes(episodes, controller, "planner", TASK, observes=observes)
+        results = run_episodes(episodes, policy, "planner", TASK)
     finally:
         for episode in episodes:
             episode.close()
@@ -98,7 +92,7 @@ def final_distances_mm(controller, scene: SceneSettings, observes) -> np.ndarray
 
 def random_pushes_mm(scene: SceneSettings) -> np.ndarray:
     seeds = tuple(SPLIT_SEEDS["validation"] + i for i in range(EPISODES))
-    return final_distances_mm(RandomController(seeds), scene, ())
+    return final_distances_mm(RandomPolicy(seeds), scene)
 
 
 @pytest.fixture(scope="module")
@@ -121,9 +115,10 @@ def trained_in(tmp_path_factory) -> ObjectInteractionModel:
 
 @pytest.mark.parametrize("kind", ["cem", "mppi"])
 def test_torchrl_planners_over_the_shipped_kinet_beat_random_pushes_from_goal_images(kind):
+    torch.manual_seed(0)  # torchrl's planners sample from the global RNG
     model = KINetWorldModel.from_pretrained("blocks_topview")
     scene = model.scene
-    planned = final_distances_mm(TorchRLController(model, kind), scene, (PIXELS,))
+    planned = final_distances_mm(TorchRLPolicy(model, kind), scene)
     random = random_pushes_mm(scene)
     print(f"KINet + torchrl {kind}: {planned.round(1)} mm; random pushes {random.round(1)} mm")
     assert planned.mean() < random.mean() - 5.0, (planned, random)
@@ -131,10 +126,9 @@ def test_torchrl_planners_over_the_shipped_kinet_beat_random_pushes_from_goal_im
 
 @pytest.mark.parametrize("kind", ["cem", "mppi"])
 def test_torchrl_planners_over_a_trained_baseline_beat_random_pushes(kind, trained_in):
+    torch.manual_seed(0)  # torchrl's planners sample from the global RNG
     scene = SceneSettings(image_size=32)
-    planned = final_distances_mm(
-        TorchRLController(trained_in, kind), scene, trained_in.capabilities.observes
-    )
+    planned = final_distances_mm(TorchRLPolicy(trained_in, kind), scene)
     random = random_pushes_mm(scene)
     print(f"IN + torchrl {kind}: {planned.round(1)} mm; random pushes {random.round(1)} mm")
     assert planned.mean() < random.mean() - 5.0, (planned, random)

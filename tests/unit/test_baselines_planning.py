@@ -3,8 +3,6 @@ method's controller (no simulation; tiny models)."""
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
 import torch
@@ -29,8 +27,8 @@ from kinet_rl.keys import (
 )
 from kinet_rl.pipeline import evaluate_rearrangement
 from kinet_rl.planners import GraphMPCPlanner, PushWorldModel, PushWorldModelEnv
-from kinet_rl.rearrangement.controllers import PlannerController
 from kinet_rl.rearrangement.methods import METHODS, MethodContext
+from kinet_rl.rearrangement.policies import PlannerPolicy
 from kinet_rl.rearrangement.settings import RearrangementSettings
 
 SIZE, N = 32, 3
@@ -153,7 +151,7 @@ def test_in_full_state_carries_yaw_and_shape_and_needs_them(tiny_baseline) -> No
     assert state[OBJECT_FEAT].shape == (N, 10)
     torch.testing.assert_close(state[OBJECT_FEAT][:, :2], torch.stack([yaw.cos(), yaw.sin()], -1))
     assert model.capabilities.needs_ground_truth and not model.capabilities.plans_from_images
-    observes = METHODS["model_mpc"].observed(model)
+    observes = model.capabilities.observes
     assert OBJECT_YAW in observes and OBJECT_SHAPE in observes
 
 
@@ -194,18 +192,19 @@ def test_in_planning_improves_the_goal_reward_over_random_actions(tiny_baseline)
 
 
 @pytest.mark.parametrize("name", ["forw", "forwinv", "in", "in_full", "visin", "vcdn"])
-def test_controller_acts_in_bounds_through_the_method_registry(name: str, tiny_baseline) -> None:
+def test_policy_acts_in_bounds_through_the_method_registry(name: str, tiny_baseline) -> None:
+    model = tiny_baseline(name)
     settings = RearrangementSettings(methods=("model_mpc",), planner=PLANNER)
-    context = MethodContext(tiny_baseline(name), SceneSettings(image_size=SIZE), settings, (0,))
-    controller = METHODS["model_mpc"].controller(context)
-    assert isinstance(controller, PlannerController)
-    assert controller.push_planner.objective == OBJECTIVE[name]
-    goal = observation(1)
-    controller.reset([SimpleNamespace(goal_pos=goal["object_pos"], goal_pixels=goal["pixels"])])
-    action = controller.act([observation(0)])
-    assert action.shape == (1, 4) and np.isfinite(action).all()
-    assert np.abs(action).max() <= 1.0
-    state = controller.push_planner.last_state
+    context = MethodContext(model, SceneSettings(image_size=SIZE), settings, (0,))
+    policy = METHODS["model_mpc"].policy(context)
+    assert isinstance(policy, PlannerPolicy)
+    assert policy.push_planner.objective == OBJECTIVE[name]
+    assert policy.in_keys == [*model.capabilities.observes, *model.capabilities.goal]
+    policy.reset()
+    action = policy(observed(model).unsqueeze(0))["action"]
+    assert action.shape == (1, 4) and torch.isfinite(action).all()
+    assert action.abs().max() <= 1.0
+    state = policy.push_planner.last_state
     assert set(state.keys(True, True)) == set(STATE_KEYS[name])
     assert PIXELS not in state.keys(True, True)
 
@@ -219,6 +218,6 @@ def test_wrong_model_kinds_are_refused_with_a_clear_error(tiny_baseline, tmp_pat
         evaluate_rearrangement(None, settings, tmp_path / "unused")
     assert not (tmp_path / "unused").exists()  # refused before anything is written
     context = MethodContext(tiny_baseline("in"), SceneSettings(image_size=SIZE), settings, (0,))
-    controller = METHODS["model_mpc"].controller(context)
-    with pytest.raises(RuntimeError, match="reset"):
-        controller.act([observation(0)])
+    policy = METHODS["model_mpc"].policy(context)
+    with pytest.raises(KeyError, match="goal"):  # no goal in the tensordict
+        policy(observed(tiny_baseline("in")).unsqueeze(0).exclude(("goal", "object_pos")))

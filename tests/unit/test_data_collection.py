@@ -1,11 +1,13 @@
 """Collection into on-disk datasets with the fake push env: splits, resumption, unstable runs,
-interruptions, a full disk, a second collector in the same folder, variable object counts."""
+interruptions, a full disk, a second collector in the same folder, variable object counts,
+checksums (``verify_dataset``, its command line, a resume over corrupt episodes)."""
 
 from __future__ import annotations
 
 import errno
 import functools
 import json
+import shutil
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -19,14 +21,18 @@ from fake_push_env import make_fake_env
 from kinet_rl.atomic import DirectoryInUseError, DiskFullError, directory_lock
 from kinet_rl.config_schema import ConfigError
 from kinet_rl.data import (
+    CorruptEpisode,
+    DatasetChecksumError,
     DatasetIncompleteError,
     DatasetMismatchError,
     collect_dataset,
     load_dataset,
     split_ranges,
+    verify_dataset,
 )
 from kinet_rl.data.object_counts import chunk_object_count
 from kinet_rl.data.storage import EPISODES_DIR, PROGRESS_FILE, EpisodeWriter
+from kinet_rl.data.verify import main as verify_command
 
 ENV_CONFIG = {"task": "fake", "camera": "top", "image_size": 8}
 
@@ -73,21 +79,27 @@ def test_split_ranges_partition_the_episodes(num_episodes: int) -> None:
     assert flat == list(range(num_episodes))
 
 
-def test_resume_after_crash_gives_the_uninterrupted_dataset(
-    reference: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def collect_first_chunk(root: Path, name: str, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """Collects like :func:`collect` until a simulated kill right after the first commit."""
     original_commit = EpisodeWriter.commit
 
     def commit_then_crash(self, *args, **kwargs):
         original_commit(self, *args, **kwargs)
         raise KeyboardInterrupt("simulated kill after the first chunk")
 
-    monkeypatch.setattr(EpisodeWriter, "commit", commit_then_crash)
-    with pytest.raises(KeyboardInterrupt):
-        collect(tmp_path, "resumed")
+    with monkeypatch.context() as patch:
+        patch.setattr(EpisodeWriter, "commit", commit_then_crash)
+        with pytest.raises(KeyboardInterrupt):
+            collect(root, name)
+    return root / name
+
+
+def test_resume_after_crash_gives_the_uninterrupted_dataset(
+    reference: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    collect_first_chunk(tmp_path, "resumed", monkeypatch)
     with pytest.raises(DatasetIncompleteError, match="3/10 episodes.*resume"):
         load_dataset(tmp_path / "resumed")
-    monkeypatch.setattr(EpisodeWriter, "commit", original_commit)
     collect(tmp_path, "resumed")
     assert (stored(tmp_path / "resumed") == stored(reference)).all()
     resumed, full = (load_dataset(p).metadata for p in (tmp_path / "resumed", reference))
@@ -309,3 +321,82 @@ def test_a_bad_object_count_range_is_refused_before_collecting(bad, tmp_path: Pa
     with pytest.raises(ConfigError, match=r"num_objects_range: got \[.*1 <= low <= high <= 5"):
         collect(tmp_path, "bad", num_objects_range=bad)
     assert not (tmp_path / "bad").exists()
+
+
+def flip_frame_bytes(path: Path, episode: int, frame: int = 2, count: int = 64) -> None:
+    """Inverts ``count`` bytes in the middle of stored frame ``frame`` of ``episode``."""
+    _, frames, height, width, channels = stored(path)["pixels"].shape
+    frame_bytes = height * width * channels
+    offset = (episode * frames + frame) * frame_bytes + (frame_bytes - count) // 2
+    with open(path / EPISODES_DIR / "pixels.memmap", "r+b") as f:
+        f.seek(offset)
+        flipped = bytes(byte ^ 0xFF for byte in f.read(count))
+        f.seek(offset)
+        f.write(flipped)
+
+
+def test_a_clean_dataset_verifies(reference: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    report = verify_dataset(reference)
+    assert report.verified and report.complete and report.checked == report.episodes == 10
+    report.raise_if_corrupt()
+    assert verify_command([str(reference)]) == 0
+    assert "OK: 10 of 10 episodes match their sha256 checksums" in capsys.readouterr().out
+
+
+def test_flipped_bytes_in_a_stored_frame_name_their_episode(
+    reference: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = shutil.copytree(reference, tmp_path / "copy")
+    flip_frame_bytes(path, episode=8)  # splits of 10 episodes: train 0-7, val 8, test 9
+    load_dataset(path, "val").sample(4)  # loading does not read the checksums
+    report = verify_dataset(path)
+    assert report.corrupt == (CorruptEpisode(8, "val"),) and report.checked == 10
+    assert not report.ok and not report.verified
+    with pytest.raises(DatasetChecksumError, match=r"CORRUPT.*episode\(s\) 8 \(val\)") as err:
+        report.raise_if_corrupt()
+    assert err.value.episodes == [8]
+    assert verify_command([str(reference), str(path)]) == 1
+    out = capsys.readouterr().out
+    assert f"{reference}: OK" in out and f"{path}: CORRUPT" in out and "8 (val)" in out
+
+
+def test_a_dataset_without_checksums_is_reported_as_unverified(
+    reference: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = shutil.copytree(reference, tmp_path / "old")
+    progress = progress_of(path)
+    del progress["checksums"]  # as written before checksums were recorded
+    (path / PROGRESS_FILE).write_text(json.dumps(progress))
+    report = verify_dataset(path)
+    assert not report.checksums_present and report.ok and not report.verified
+    assert "NOT VERIFIED: no checksums recorded" in report.summary()
+    assert verify_command([str(path)]) == 2
+    assert "cannot be checked" in capsys.readouterr().out
+    assert load_dataset(path).num_episodes == 8  # it still loads
+
+
+def test_a_resume_refuses_corrupt_reused_episodes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = collect_first_chunk(tmp_path, "partial", monkeypatch)
+    flip_frame_bytes(path, episode=1)
+    assert verify_dataset(path).corrupt == (CorruptEpisode(1, "train"),)
+    with pytest.raises(DatasetChecksumError, match=r"Cannot resume .*episodes \[1\].*Delete"):
+        collect(tmp_path, "partial")
+    assert progress_of(path)["committed"] == 3  # nothing was built on them
+
+
+def test_a_resume_of_a_collection_without_checksums_checks_the_new_episodes(
+    reference: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = collect_first_chunk(tmp_path, "old", monkeypatch)
+    progress = progress_of(path)
+    del progress["checksums"]  # started before checksums were recorded
+    (path / PROGRESS_FILE).write_text(json.dumps(progress))
+    collect(tmp_path, "old")
+    report = verify_dataset(path)
+    assert report.ok and report.checked == 7 and not report.verified
+    assert "3 episodes were committed without checksums" in report.summary()
+    assert progress_of(path)["checksums"] == progress_of(reference)["checksums"] | {
+        "episodes": [None] * 3 + progress_of(reference)["checksums"]["episodes"][3:]
+    }

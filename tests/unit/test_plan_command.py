@@ -10,7 +10,7 @@ from PIL import Image
 
 from kinet_rl import plan
 from kinet_rl.envs import SceneSettings
-from kinet_rl.models import PushPlanner
+from kinet_rl.models import KINetWorldModel, PushPlanner
 from kinet_rl.planners import VALIDATED_PLANNER, PlanningDefaults
 
 BUDGET = {**VALIDATED_PLANNER, "num_candidates": 12, "top_k": 3, "optim_steps": 2}
@@ -79,3 +79,15 @@ def test_resize_resizes_to_the_models_size_and_says_so(
     assert all(-1.0 <= v <= 1.0 for v in push["normalised"])
     assert "from 24x24 to 16x16 px (--resize)" in caplog.text
     assert "from 12x12 to 16x16 px (--resize)" in caplog.text
+
+
+def test_a_model_folder_plans_as_its_checkpoint_does(
+    checkpoint, tmp_path, random_images, capsys
+) -> None:
+    image, goal = write_images(tmp_path, random_images, (16, 16))
+    folder = KINetWorldModel.from_checkpoint(checkpoint).save_pretrained(tmp_path / "model")
+    args = ["--image", image, "--goal", goal, "--seed", "3"]
+    from_file = plan.main(["--checkpoint", str(checkpoint), *args])
+    from_folder = plan.main(["--checkpoint", str(folder), *args])
+    assert from_folder == from_file
+    capsys.readouterr()

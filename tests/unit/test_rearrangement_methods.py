@@ -55,14 +55,14 @@ def test_models_that_cannot_plan_a_method_are_reported(tiny_kinet, tiny_baseline
         )
 
 
-def test_a_controller_is_refused_for_the_wrong_model(tiny_kinet, tiny_baseline) -> None:
+def test_a_policy_is_refused_for_the_wrong_model(tiny_kinet, tiny_baseline) -> None:
     settings = RearrangementSettings()
     context = MethodContext(tiny_baseline("in"), SceneSettings(), settings, seeds=(0,))
     with pytest.raises(ValueError, match="model_mpc"):
-        METHODS["kinet_graph_distance"].controller(context)
+        METHODS["kinet_graph_distance"].policy(context)
     with pytest.raises(ValueError, match="need a model"):
-        METHODS["kinet_graph"].controller(MethodContext(None, SceneSettings(), settings, (0,)))
-    assert METHODS["random"].controller(MethodContext(None, SceneSettings(), settings, (0,)))
+        METHODS["kinet_graph"].policy(MethodContext(None, SceneSettings(), settings, (0,)))
+    assert METHODS["random"].policy(MethodContext(None, SceneSettings(), settings, (0,)))
     check_model(RearrangementSettings(methods=("model_mpc",)).conditions(), tiny_baseline("in"))
 
 
@@ -75,15 +75,22 @@ def test_conditions_compare_by_value_so_worker_results_find_theirs() -> None:
     assert condition("generalization") != condition("comparison")
 
 
-def test_a_planning_method_observes_what_its_model_declares(tiny_kinet, tiny_baseline) -> None:
+def test_a_policy_reads_only_what_its_model_declares(tiny_kinet, tiny_baseline) -> None:
+    settings = RearrangementSettings(planner={"num_candidates": 8, "top_k": 2, "optim_steps": 1})
+
+    def in_keys(method: str, model) -> list:
+        scene = SceneSettings(image_size=16)
+        return METHODS[method].policy(MethodContext(model, scene, settings, (0,))).in_keys
+
     for method in METHODS.values():
         if method.objective is not None:
-            assert method.observed(tiny_kinet()) == ("pixels",), method.name
+            assert in_keys(method.name, tiny_kinet()) == ["pixels", ("goal", "pixels")]
     for name in ("forw", "forwinv", "vcdn"):
-        assert METHODS["model_mpc"].observed(tiny_baseline(name)) == ("pixels",)
-    assert METHODS["model_mpc"].observed(tiny_baseline("in")) == ("object_pos",)
-    in_full = METHODS["model_mpc"].observed(tiny_baseline("in_full"))
-    assert in_full == ("object_pos", "object_yaw", "object_shape")  # GT-state ceilings
-    assert METHODS["model_mpc"].observed(tiny_baseline("visin")) == ("pixels", "object_pos")
-    assert METHODS["oracle"].observed(None) == ("object_pos",)
-    assert METHODS["random"].observed(None) == ()
+        assert in_keys("model_mpc", tiny_baseline(name)) == ["pixels", ("goal", "pixels")]
+    goal = ("goal", "object_pos")
+    assert in_keys("model_mpc", tiny_baseline("in")) == ["object_pos", goal]
+    in_full = in_keys("model_mpc", tiny_baseline("in_full"))
+    assert in_full == ["object_pos", "object_yaw", "object_shape", goal]  # GT-state ceilings
+    assert in_keys("model_mpc", tiny_baseline("visin")) == ["pixels", "object_pos", goal]
+    assert in_keys("oracle", None) == ["object_pos", goal]
+    assert in_keys("random", None) == []

@@ -13,7 +13,6 @@ from tensordict import TensorDict, TensorDictBase
 
 from kinet_rl.data.storage import (
     COLLECT_HINT,
-    EPISODES_DIR,
     FORMAT_VERSION,
     METADATA_FILE,
     PROGRESS_FILE,
@@ -22,6 +21,7 @@ from kinet_rl.data.storage import (
     DatasetMismatchError,
     DatasetNotFoundError,
     check_array_files,
+    open_episodes,
     read_json,
     stored_array_specs,
 )
@@ -130,14 +130,7 @@ class PushDataset:
             raise ValueError(f"Unknown split {split!r}; {path} has {sorted(splits)}.")
         self.split = split
         check_array_files(path, metadata["num_episodes"], stored_array_specs(metadata))
-        try:
-            stored = TensorDict.load_memmap(path / EPISODES_DIR)
-        except Exception as err:  # tensordict raises several types for a damaged folder
-            raise DatasetCorruptError(
-                f"Cannot open the arrays in {path / EPISODES_DIR} ({type(err).__name__}: {err}). "
-                f"Delete {path} and collect it again: {COLLECT_HINT}"
-            ) from err
-        self._attach(stored, *splits[split])
+        self._attach(open_episodes(path), *splits[split])
         if self.num_episodes < 1:
             raise ValueError(f"Split {split!r} of {path} holds no episodes.")
 

@@ -12,7 +12,8 @@ Layout of ``<root>/<name>/``::
       num_objects.memmap     int64 [E]  objects per episode (variable-count datasets only;
                              their object arrays hold NaN beyond it, N = the range's high)
       meta.json              tensordict's own shapes and dtypes
-    progress.json      committed episodes, processed (kept + discarded) source episodes, settings
+    progress.json      committed episodes, processed (kept + discarded) source episodes, settings,
+                       and ``checksums``: the SHA-256 of every committed episode's stored bytes
     metadata.json      written last, atomically: its presence marks the dataset complete;
                        ``arrays`` lists the stored arrays
 
@@ -20,15 +21,22 @@ Datasets collected before ``object_shape`` was stored have no ``arrays`` entry a
 they load for every model that does not need the shapes (see :data:`OPTIONAL_ARRAYS`). A
 variable-count dataset records ``num_objects_range`` ``[low, high]`` in its metadata
 (:mod:`kinet_rl.data.object_counts`).
+
+Each commit records, in the same atomic replacement of ``progress.json``, one SHA-256 digest per
+committed episode over its rows of every stored array (:func:`episode_digests`); a resumed
+writer checks the episodes it builds on, and :func:`kinet_rl.data.verify_dataset` checks a
+dataset. Datasets written before checksums were recorded have none (``checksums`` absent, or
+None for the episodes committed before a resume by a newer kinet_rl).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import os
 import shutil
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +56,8 @@ FORMAT_VERSION = 1
 COLLECT_HINT = "python -m kinet_rl.collect [+exp=<experiment>] data.root=<root> data.name=<name>"
 #: Arrays that datasets of older kinet_rl versions lack (their metadata has no ``arrays``).
 OPTIONAL_ARRAYS = (OBJECT_SHAPE,)
+#: ``hashlib`` name of the per-episode digests in ``progress.json``'s ``checksums``.
+CHECKSUM_ALGORITHM = "sha256"
 
 
 class DatasetError(Exception):
@@ -68,6 +78,18 @@ class DatasetCorruptError(DatasetError):
 
 class DatasetMismatchError(DatasetError):
     """The dataset differs from what the caller expects, or from the settings of a resumed run."""
+
+
+class DatasetChecksumError(DatasetCorruptError):
+    """Stored episodes differ from the checksums recorded when they were written.
+
+    Attributes:
+        episodes: the corrupt episodes' indices in the stored arrays.
+    """
+
+    def __init__(self, message: str, episodes: Sequence[int]) -> None:
+        super().__init__(message)
+        self.episodes = list(episodes)
 
 
 def read_json(path: Path) -> dict[str, Any]:
@@ -98,6 +120,80 @@ def stored_episodes(path: Path) -> tuple[int, bool]:
     if (path / PROGRESS_FILE).exists():
         return int(read_json(path / PROGRESS_FILE)["committed"]), False
     return 0, False
+
+
+def open_episodes(path: Path) -> TensorDict:
+    """The memory-mapped episode arrays of the dataset folder ``path`` (no copy).
+
+    Raises:
+        DatasetCorruptError: tensordict cannot open them.
+    """
+    try:
+        return TensorDict.load_memmap(path / EPISODES_DIR)
+    except Exception as err:  # tensordict raises several types for a damaged folder
+        raise DatasetCorruptError(
+            f"Cannot open the arrays in {path / EPISODES_DIR} ({type(err).__name__}: {err}). "
+            f"Delete {path} and collect it again: {COLLECT_HINT}"
+        ) from err
+
+
+def episode_digests(
+    storage: TensorDictBase, names: Sequence[str], start: int, stop: int
+) -> list[str]:
+    """SHA-256 hex digests of the stored episodes ``start:stop``, one per episode.
+
+    An episode's digest covers its rows of the arrays ``names``, in that order, as stored
+    (raw bytes, NaN padding included).
+    """
+    arrays = [storage.get(name).as_subclass(torch.Tensor) for name in names]
+    digests = []
+    for episode in range(start, stop):
+        digest = hashlib.new(CHECKSUM_ALGORITHM)
+        for array in arrays:
+            digest.update(array[episode].contiguous().numpy())
+        digests.append(digest.hexdigest())
+    return digests
+
+
+def recorded_checksums(
+    path: Path, progress: Mapping[str, Any]
+) -> tuple[list[str], list[str | None]] | None:
+    """The arrays and the per-episode digests (None: committed without one) that the progress
+    record ``progress`` of dataset ``path`` holds, or None if it has no checksums (an older
+    kinet_rl wrote it).
+
+    Raises:
+        DatasetCorruptError: the record is malformed.
+    """
+    record = progress.get("checksums")
+    if record is None:
+        return None
+    committed = int(progress["committed"])
+    if (
+        not isinstance(record, dict)
+        or record.get("algorithm") != CHECKSUM_ALGORITHM
+        or not isinstance(record.get("arrays"), list)
+        or not isinstance(record.get("episodes"), list)
+        or len(record["episodes"]) != committed
+    ):
+        raise DatasetCorruptError(
+            f"The checksum record in {path / PROGRESS_FILE} is malformed (expected "
+            f"{CHECKSUM_ALGORITHM} digests of {committed} episodes). Delete {path} and collect "
+            f"it again: {COLLECT_HINT}"
+        )
+    return record["arrays"], record["episodes"]
+
+
+def mismatched_episodes(
+    storage: TensorDictBase, names: Sequence[str], recorded: Sequence[str | None]
+) -> list[int]:
+    """Indices of the stored episodes whose digest differs from ``recorded`` (None: unchecked)."""
+    actual = episode_digests(storage, names, 0, len(recorded))
+    return [
+        episode
+        for episode, (expected, digest) in enumerate(zip(recorded, actual, strict=True))
+        if expected is not None and expected != digest
+    ]
 
 
 def episode_array_specs(
@@ -191,10 +287,11 @@ class EpisodeWriter:
                     f"original settings to resume, or delete {self.path} to start over."
                 )
             check_array_files(self.path, num_episodes, self.specs)
-            self.storage = TensorDict.load_memmap(self.path / EPISODES_DIR)
+            self.storage = open_episodes(self.path)
             self.committed = int(progress["committed"])
             self.processed = int(progress["processed"])
             self.discarded = int(progress["discarded_unstable"])
+            self.checksums = self._verify_reused(progress)
             logger.info("Resuming %s at %d/%d episodes.", self.path, self.committed, num_episodes)
         else:
             self.path.mkdir(parents=True, exist_ok=True)
@@ -208,6 +305,7 @@ class EpisodeWriter:
             self.storage = template.memmap_like(self.path / EPISODES_DIR)
             self._allocate()
             self.committed = self.processed = self.discarded = 0
+            self.checksums = []
             self._write_progress()
 
     def _allocate(self) -> None:
@@ -234,6 +332,40 @@ class EpisodeWriter:
                         "(data.root), then run the command again.",
                     ) from err
 
+    def _verify_reused(self, progress: Mapping[str, Any]) -> list[str | None]:
+        """Checks the committed episodes against their checksums; returns the checksums.
+
+        Raises:
+            DatasetChecksumError: some differ (the message names them and the fix).
+        """
+        recorded = recorded_checksums(self.path, progress)
+        if recorded is None:
+            logger.warning(
+                "%s: its %d committed episodes were written without checksums (by an older "
+                "kinet_rl) and cannot be verified; the episodes collected now get checksums.",
+                self.path,
+                self.committed,
+            )
+            return [None] * self.committed
+        arrays, digests = recorded
+        if arrays != list(self.specs):
+            raise DatasetCorruptError(
+                f"{self.path / PROGRESS_FILE} records checksums of the arrays {arrays}, but the "
+                f"dataset stores {list(self.specs)}. Delete {self.path} and collect it again: "
+                f"{COLLECT_HINT}"
+            )
+        corrupt = mismatched_episodes(self.storage, arrays, digests)
+        if corrupt:
+            raise DatasetChecksumError(
+                f"Cannot resume {self.path}: the stored bytes of its episodes {corrupt} (of "
+                f"{self.committed} committed) differ from the checksums recorded when they were "
+                "written (a disk, memory or copy error, or an edit), and the rest of the "
+                f"dataset would be built on them. Delete {self.path} and collect it again: "
+                f"{COLLECT_HINT}",
+                corrupt,
+            )
+        return list(digests)
+
     def _write_progress(self) -> None:
         atomic_write_json(
             self.path / PROGRESS_FILE,
@@ -243,11 +375,17 @@ class EpisodeWriter:
                 "discarded_unstable": self.discarded,
                 "num_episodes": self.num_episodes,
                 "settings": self.settings,
+                "checksums": {
+                    "algorithm": CHECKSUM_ALGORITHM,
+                    "arrays": list(self.specs),
+                    "episodes": self.checksums,
+                },
             },
         )
 
     def commit(self, episodes: TensorDictBase | None, processed: int, discarded: int) -> None:
-        """Writes ``episodes`` [k] after the committed ones, syncs, then records progress.
+        """Writes ``episodes`` [k] after the committed ones, syncs, then records progress and
+        the new episodes' checksums (one atomic write).
 
         Args:
             episodes: batch [k] with the stored arrays' keys (for a variable-count dataset: of
@@ -268,6 +406,7 @@ class EpisodeWriter:
             for name in self.specs:
                 with open(self.path / EPISODES_DIR / f"{name}.memmap", "rb+") as f:
                     os.fsync(f.fileno())
+            self.checksums += episode_digests(self.storage, list(self.specs), self.committed, stop)
         self.committed, self.processed, self.discarded = stop, processed, discarded
         self._write_progress()
 

@@ -30,7 +30,6 @@ from kinet_rl.models.imagination import KEYPOINT_OBJECTIVES, keypoint_graph_worl
 from kinet_rl.models.interaction import GraphPrediction, KeypointInteractionNet
 from kinet_rl.models.keypoint_model import KeypointWorldModel
 from kinet_rl.models.keypoints import KeypointDetector, KeypointReconstructor, pixels_to_input
-from kinet_rl.models.pretrained import pretrained_path
 from kinet_rl.planners.world_model import (
     ModelCapabilities,
     PlanningDefaults,
@@ -155,12 +154,6 @@ class KINetWorldModel(ConfigCheckpointMixin, KeypointWorldModel):
         self.interaction = KeypointInteractionNet(
             feat_dim, embed_dim, hidden_dim, num_hidden, num_rounds, deterministic, action_frame
         )
-
-    @classmethod
-    def from_pretrained(cls, name: str) -> KINetWorldModel:
-        """A model shipped with the package (:func:`~kinet_rl.models.pretrained.pretrained_names`;
-        its card: :func:`~kinet_rl.models.pretrained.model_card`), in eval mode."""
-        return cls.from_checkpoint(pretrained_path(name)).eval()
 
     def world_model(self, objective: str | None = None, fast: bool = True) -> PushWorldModel:
         """KINet as a ``torchrl.modules.WorldModel`` planning with ``objective`` (default: its

@@ -1,21 +1,22 @@
-"""Rearrangement by MPC: settings, episodes with reachable goals, controllers, the method
+"""Rearrangement by MPC: settings, episodes with reachable goals, policies, the method
 registry, a parallel runner that returns results, and the report written from them.
 
 Dependency order inside the package: ``settings`` <- ``results`` <- ``episodes`` <-
-``controllers`` <- ``methods`` <- ``runner``; ``report`` depends on ``settings`` and ``results``.
+``policies`` <- ``methods`` <- ``runner``; ``report`` depends on ``settings`` and ``results``.
 """
 
 from __future__ import annotations
 
-from kinet_rl.rearrangement.controllers import PlannerController, RandomController
 from kinet_rl.rearrangement.episodes import (
-    Controller,
     Episode,
+    EpisodesEnv,
+    Policy,
     make_episode,
     run_episode,
     run_episodes,
 )
 from kinet_rl.rearrangement.methods import METHODS, Method, MethodContext
+from kinet_rl.rearrangement.policies import PlannerPolicy, RandomPolicy
 from kinet_rl.rearrangement.report import write_report
 from kinet_rl.rearrangement.results import EpisodeResult, RearrangementResults, summarize
 from kinet_rl.rearrangement.runner import run_rearrangement
@@ -29,13 +30,14 @@ from kinet_rl.rearrangement.settings import (
 __all__ = [
     "METHODS",
     "Condition",
-    "Controller",
     "Episode",
+    "EpisodesEnv",
     "EpisodeResult",
     "Method",
     "MethodContext",
-    "PlannerController",
-    "RandomController",
+    "PlannerPolicy",
+    "Policy",
+    "RandomPolicy",
     "RearrangementResults",
     "RearrangementSettings",
     "TaskSettings",

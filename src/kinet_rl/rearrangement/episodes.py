@@ -1,4 +1,4 @@
-"""The rearrangement task: episodes with reachable goals, and running a controller on one.
+"""The rearrangement task: episodes with reachable goals, and running a policy on them.
 
 How an episode is made (seeded by its ``seed`` alone):
 
@@ -10,7 +10,8 @@ How an episode is made (seeded by its ``seed`` alone):
    reachable by construction in ``goal_pushes`` pushes, well within ``T``.
 3. A draw is rejected and redrawn (new placement) when the simulation goes unstable or the
    objects moved on average less than ``min_goal_distance`` metres.
-4. The physics state of step 1 is restored and the controller gets ``num_steps`` pushes.
+4. The physics state of step 1 is restored and the policy gets ``num_steps`` pushes: a TorchRL
+   rollout of :class:`EpisodesEnv` (the episodes as one batched env, goals in the tensordict).
 
 Metrics come from the simulator's ground truth, in metres: the mean over objects of the
 distance between each object's centre and its own goal position, after every push (index 0 is
@@ -26,13 +27,28 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
+import torch
+from tensordict import NestedKey, TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+from torchrl.data import Bounded, Composite, Unbounded
+from torchrl.envs import EnvBase
 
 from kinet_rl.data.policy import RandomPushPolicy
 from kinet_rl.envs import make_dm_env
 from kinet_rl.envs.settings import SceneSettings
 from kinet_rl.envs.workspace import workspace_for
 from kinet_rl.evaluation.similarity import ssim
-from kinet_rl.keys import OBJECT_POS, PIXELS
+from kinet_rl.keys import (
+    ACTION,
+    GOAL_DISTANCE,
+    GOAL_KP_POS,
+    GOAL_OBJECT_POS,
+    GOAL_PIXELS,
+    GOAL_SSIM,
+    KP_POS,
+    OBJECT_POS,
+    PIXELS,
+)
 from kinet_rl.rearrangement.results import EpisodeResult
 from kinet_rl.rearrangement.settings import TaskSettings
 
@@ -96,95 +112,156 @@ def make_episode(scene: SceneSettings, task: TaskSettings, seed: int) -> Episode
     )
 
 
-class Controller(Protocol):
-    """Chooses the pushes of a batch of episodes (:mod:`kinet_rl.rearrangement.controllers`)."""
+class Policy(Protocol):
+    """Chooses the pushes of a batch of episodes: a TorchRL policy (``TensorDictModuleBase``)
+    that reads its ``in_keys`` (the observation entries and goal entries it declares) and writes
+    ``action`` ``[B, 4]`` in ``[-1, 1]`` (:mod:`kinet_rl.rearrangement.policies`)."""
 
-    def reset(self, episodes: Sequence[Episode]) -> None:
-        """Called once before the first push, with the episodes it plans for."""
+    in_keys: list[NestedKey]
 
-    def act(self, observations: Sequence[dict[str, np.ndarray]]) -> np.ndarray:
-        """The next push of each episode, ``[B, 4]`` in ``[-1, 1]``, from the env observations."""
+    def reset(self) -> None:
+        """Called once before the first push."""
+
+    def __call__(self, tensordict: TensorDictBase) -> TensorDictBase: ...
+
+
+class EpisodesEnv(EnvBase):
+    """``B`` live episodes as one TorchRL env of batch ``[B]``, the goal in the tensordict.
+
+    Reset returns each episode's start observation (the env is not reset: the episode is at its
+    start state) with its goal (``("goal", "pixels")``, ``("goal", "object_pos")``); a step pushes
+    each episode that is still stable (an unstable simulation has ended its episode: it keeps its
+    last observation, so its distance and SSIM are carried to ``T``). Every observation carries
+    the ground-truth ``goal_distance`` (metres) and the ``goal_ssim`` of the image to the goal
+    image, computed from the simulator's own arrays; the reward is minus the goal distance.
+    Episodes never report ``done``: an episode lasts ``T`` pushes.
+    """
+
+    def __init__(self, episodes: Sequence[Episode]) -> None:
+        super().__init__(batch_size=torch.Size([len(episodes)]))
+        self.episodes = list(episodes)
+        batch = self.batch_size
+        start = episodes[0].start
+        specs = {
+            key: Unbounded((*batch, *value.shape), dtype=torch.from_numpy(value).dtype)
+            for key, value in start.items()
+        }
+        specs[GOAL_PIXELS] = specs[PIXELS].clone()
+        specs[GOAL_OBJECT_POS] = specs[OBJECT_POS].clone()
+        specs[GOAL_DISTANCE] = Unbounded(batch, dtype=torch.float64)
+        specs[GOAL_SSIM] = Unbounded(batch, dtype=torch.float64)
+        self.observation_spec = Composite(specs, shape=batch)
+        self.action_spec = Bounded(-1.0, 1.0, (*batch, 4))
+        self.reward_spec = Unbounded((*batch, 1), dtype=torch.float64)
+        self.observations: list[dict[str, np.ndarray]] = []
+
+    def _observe(self) -> TensorDictBase:
+        observations, episodes = self.observations, self.episodes
+        keys = observations[0].keys()
+        entries = {key: np.stack([obs[key] for obs in observations]) for key in keys}
+        entries[GOAL_PIXELS] = np.stack([e.goal_pixels for e in episodes])
+        entries[GOAL_OBJECT_POS] = np.stack([e.goal_pos for e in episodes])
+        distance = [mean_goal_distance(o[OBJECT_POS], e.goal_pos) for o, e in self._pairs()]
+        entries[GOAL_DISTANCE] = np.asarray(distance, np.float64)
+        entries[GOAL_SSIM] = np.asarray([goal_similarity(o, e) for o, e in self._pairs()])
+        out = TensorDict(
+            {key: torch.from_numpy(value) for key, value in entries.items()}, self.batch_size
+        )
+        out.set("reward", -out.get(GOAL_DISTANCE).unsqueeze(-1))
+        return out
+
+    def _pairs(self) -> list[tuple[dict[str, np.ndarray], Episode]]:
+        return list(zip(self.observations, self.episodes, strict=True))
+
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
+        self.observations = [dict(episode.start) for episode in self.episodes]
+        return self._observe().exclude("reward")
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        actions = np.clip(tensordict.get(ACTION).numpy().astype(np.float32), -1.0, 1.0)
+        for i, episode in enumerate(self.episodes):
+            if not episode.env.task.unstable:
+                self.observations[i] = episode.env.step(actions[i]).observation
+        return self._observe()
+
+    def _set_seed(self, seed: int | None) -> None:
+        """The episodes are seeded when made (:func:`make_episode`)."""
 
 
 def run_episodes(
     episodes: Sequence[Episode],
-    controller: Controller,
+    policy: Policy,
     method: str,
     task: TaskSettings,
     record: Sequence[bool] | None = None,
-    observes: tuple[str, ...] | None = None,
 ) -> list[EpisodeResult]:
-    """Runs ``task.num_steps`` pushes of ``controller`` on every episode, in lockstep.
+    """Runs ``task.num_steps`` pushes of ``policy`` on every episode: one TorchRL rollout of an
+    :class:`EpisodesEnv`, one batched plan per step for all episodes.
 
-    At each step the controller is asked once for the pushes of all episodes (one batched plan),
-    then each episode's simulator takes its push. An unstable simulation ends its episode early
-    (its last distance and SSIM are carried to ``T``); the controller keeps planning for it on
-    its last observation, so that the others' plans and warm starts are those they would have alone.
-    Episodes flagged in ``record`` keep their frames and (for KINet controllers) detected
-    keypoints. With ``observes`` the controller is handed only those observation entries (e.g.
-    ``("pixels",)``: no ground truth reaches a controller that plans from images).
+    The policy is handed only the entries it declares (``policy.in_keys``): no ground truth
+    reaches a policy that plans from images. An unstable simulation ends its episode early (its
+    last distance and SSIM are carried to ``T``); the policy keeps planning for it on its last
+    observation, so that the others' plans and warm starts are those they would have alone.
+    Episodes flagged in ``record`` keep their frames and (for keypoint models) the detected
+    keypoints.
     """
     record = [False] * len(episodes) if record is None else list(record)
     if len(record) != len(episodes):
         raise ValueError(f"record has {len(record)} flags for {len(episodes)} episodes.")
-    obs = [episode.start for episode in episodes]
-    distances = [
-        [mean_goal_distance(o[OBJECT_POS], e.goal_pos)] for o, e in zip(obs, episodes, strict=True)
-    ]
-    similarities = [[goal_similarity(o, e)] for o, e in zip(obs, episodes, strict=True)]
-    results = [EpisodeResult(method, e.seed, np.zeros(0), False, False) for e in episodes]
-    controller.reset(episodes)
-    for _ in range(task.num_steps):
-        live = [i for i, result in enumerate(results) if not result.unstable]
-        if not live:
-            break
-        seen = [o if observes is None else {key: o[key] for key in observes} for o in obs]
-        actions = np.clip(np.asarray(controller.act(seen), dtype=np.float32), -1.0, 1.0)
-        for i in live:
-            episode = episodes[i]
-            if record[i]:
-                _record(results[i], controller, obs[i], i)
-            obs[i] = episode.env.step(actions[i]).observation
-            distances[i].append(mean_goal_distance(obs[i][OBJECT_POS], episode.goal_pos))
-            similarities[i].append(goal_similarity(obs[i], episode))
-            results[i].unstable = bool(episode.env.task.unstable)
-    for i, (episode, result) in enumerate(zip(episodes, results, strict=True)):
+    env = EpisodesEnv(episodes)
+    policy.reset()
+    rollout = env.rollout(
+        task.num_steps, DeclaredInputs(policy), auto_reset=True, break_when_any_done=False
+    )
+    results = []
+    for i, episode in enumerate(episodes):
+        steps = rollout[i]
+        final = steps[-1].get("next")
+        result = EpisodeResult(
+            method,
+            episode.seed,
+            torch.cat([steps[:1].get(GOAL_DISTANCE), steps.get(("next", GOAL_DISTANCE))]).numpy(),
+            all_within(final.get(OBJECT_POS).numpy(), episode.goal_pos, task.success_threshold),
+            bool(episode.env.task.unstable),
+            torch.cat([steps[:1].get(GOAL_SSIM), steps.get(("next", GOAL_SSIM))]).numpy(),
+        )
         if record[i]:
-            result.frames.append(obs[i][PIXELS].copy())
-            result.goal_pixels = episode.goal_pixels
-            goal_keypoints = _keypoints(controller, "last_goal_keypoints", i)
-            if goal_keypoints is not None:
-                result.goal_keypoints = goal_keypoints
-        missing = task.num_steps + 1 - len(distances[i])
-        result.distances = np.asarray(distances[i] + [distances[i][-1]] * missing, np.float64)
-        result.goal_ssim = np.asarray(similarities[i] + [similarities[i][-1]] * missing, np.float64)
-        result.success = all_within(obs[i][OBJECT_POS], episode.goal_pos, task.success_threshold)
+            _record(result, steps, episode)
+        results.append(result)
     return results
+
+
+class DeclaredInputs(TensorDictModuleBase):
+    """Runs ``policy`` on the entries it declares only and returns its outputs."""
+
+    def __init__(self, policy: Policy) -> None:
+        super().__init__()
+        self.policy = policy
+        self.in_keys = list(policy.in_keys)
+        self.out_keys = [ACTION, KP_POS, GOAL_KP_POS]
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        outputs = self.policy(tensordict.select(*self.in_keys))
+        return tensordict.update(outputs.exclude(*self.in_keys))
+
+
+def _record(result: EpisodeResult, steps: TensorDictBase, episode: Episode) -> None:
+    """Frames (and planned keypoints) of the pushes the episode took while stable, and its end."""
+    live = ~steps.get("unstable").squeeze(-1)
+    result.frames = [frame.numpy() for frame in steps.get(PIXELS)[live]]
+    result.frames.append(steps[-1].get(("next", PIXELS)).numpy())
+    result.goal_pixels = episode.goal_pixels
+    if KP_POS in steps.keys(True):
+        result.keypoints = [keypoints.numpy() for keypoints in steps.get(KP_POS)[live]]
+        result.goal_keypoints = steps[-1].get(GOAL_KP_POS).numpy()
 
 
 def run_episode(
     episode: Episode,
-    controller: Controller,
+    policy: Policy,
     method: str,
     task: TaskSettings,
     record: bool = False,
-    observes: tuple[str, ...] | None = None,
 ) -> EpisodeResult:
-    """:func:`run_episodes` for one episode."""
-    return run_episodes([episode], controller, method, task, [record], observes)[0]
-
-
-def _keypoints(controller: Controller, name: str, i: int) -> np.ndarray | None:
-    """Episode ``i``'s keypoints ``[K, 2]`` of a KINet controller's planner, else None."""
-    push_planner = getattr(controller, "push_planner", None)
-    keypoints = None if push_planner is None else getattr(push_planner, name)
-    return None if keypoints is None else keypoints[i].numpy()
-
-
-def _record(
-    result: EpisodeResult, controller: Controller, obs: dict[str, np.ndarray], i: int
-) -> None:
-    result.frames.append(obs[PIXELS].copy())
-    keypoints = _keypoints(controller, "last_keypoints", i)
-    if keypoints is not None:
-        result.keypoints.append(keypoints)
+    """Runs one episode (see :func:`run_episodes`)."""
+    return run_episodes([episode], policy, method, task, [record])[0]

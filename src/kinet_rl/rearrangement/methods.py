@@ -1,7 +1,7 @@
-"""The methods of the rearrangement evaluation: one declaration each, with label and controller.
+"""The methods of the rearrangement evaluation: one declaration each, with label and policy.
 
-A method's controller factory gets a :class:`MethodContext` (the model, the episodes' scene, the
-settings and the episode seeds: one controller plans for a batch of episodes). A planning method
+A method's policy factory gets a :class:`MethodContext` (the model, the episodes' scene, the
+settings and the episode seeds: one policy plans for a batch of episodes). A planning method
 plans with the model through a :class:`~kinet_rl.models.PushPlanner` and a planning objective:
 ``kinet_<objective>`` with that objective of :data:`~kinet_rl.planners.OBJECTIVES` (any model
 that declares it: KINet's graph and keypoint objectives), ``model_mpc`` with the model's own
@@ -16,17 +16,16 @@ from dataclasses import dataclass
 from kinet_rl.baselines.oracle import AnalyticPushModel
 from kinet_rl.envs.settings import SceneSettings
 from kinet_rl.envs.workspace import workspace_for
-from kinet_rl.keys import OBJECT_POS
 from kinet_rl.models.push_planner import PushPlanner
 from kinet_rl.planners.world_model import ModelCapabilities, PlanningDefaults, PlanningInterface
-from kinet_rl.rearrangement.controllers import PlannerController, RandomController
-from kinet_rl.rearrangement.episodes import Controller
+from kinet_rl.rearrangement.episodes import Policy
+from kinet_rl.rearrangement.policies import PlannerPolicy, RandomPolicy
 from kinet_rl.rearrangement.settings import Condition, RearrangementSettings
 
 
 @dataclass(frozen=True)
 class MethodContext:
-    """What a controller factory is given for a batch of episodes of one scene."""
+    """What a policy factory is given for a batch of episodes of one scene."""
 
     model: PlanningInterface | None
     scene: SceneSettings
@@ -43,19 +42,16 @@ class Method:
         label: How reports and tables name it.
         plans_with_model: Whether it plans with the evaluated model.
         objective: The planning objective of a model method (None: the model's own).
-        make_controller: Builds its controller for a batch of episodes.
-        observes: The observation entries its controller is handed each step, for methods
-            without a model (random: none; the oracle: ``object_pos``); a model method's
-            controller is handed what the model declares (``capabilities.observes``): camera
-            images for KINet, Forw, ForwInv and V-CDN, ground-truth state for IN, IN-full, VisIN.
+        make_policy: Builds its policy for a batch of episodes; the policy declares what it
+            reads (``in_keys``: what its model declares; random pushes read nothing, the oracle
+            object positions and goal positions).
     """
 
     name: str
     label: str
     plans_with_model: bool
     objective: str | None
-    make_controller: Callable[[MethodContext], Controller]
-    observes: tuple[str, ...] = ()
+    make_policy: Callable[[MethodContext], Policy]
 
     def plans_with(self, capabilities: ModelCapabilities) -> bool:
         """Whether this method can plan with a model that declares ``capabilities``."""
@@ -75,40 +71,32 @@ class Method:
                 "method 'model_mpc' for a model's own objective."
             )
 
-    def observed(self, model: PlanningInterface | None) -> tuple[str, ...]:
-        """The observation entries this method's controller is handed."""
-        if self.plans_with_model and model is not None:
-            return model.capabilities.observes
-        return self.observes
-
-    def controller(self, ctx: MethodContext) -> Controller:
-        """The method's controller for the context's episodes, after checking the model."""
+    def policy(self, ctx: MethodContext) -> Policy:
+        """The method's policy for the context's episodes, after checking the model."""
         self.check_model(ctx.model)
-        return self.make_controller(ctx)
+        return self.make_policy(ctx)
 
 
-def _planning(objective: str | None) -> Callable[[MethodContext], Controller]:
-    def make(ctx: MethodContext) -> Controller:
-        assert ctx.model is not None  # Method.controller checked it
-        return _planner_controller(ctx.model, objective, ctx)
+def _planning(objective: str | None) -> Callable[[MethodContext], Policy]:
+    def make(ctx: MethodContext) -> Policy:
+        assert ctx.model is not None  # Method.policy checked it
+        return _planner_policy(ctx.model, objective, ctx)
 
     return make
 
 
-def _planner_controller(
-    model: PlanningInterface, objective: str | None, ctx: MethodContext
-) -> Controller:
+def _planner_policy(model: PlanningInterface, objective: str | None, ctx: MethodContext) -> Policy:
     half_size = workspace_for(ctx.scene.task).half_size
     planner = PushPlanner(
         model, objective, dict(ctx.settings.planner), workspace_half_size=half_size, seed=ctx.seeds
     )
-    return PlannerController(planner)
+    return PlannerPolicy(planner)
 
 
-def _oracle(ctx: MethodContext) -> Controller:
+def _oracle(ctx: MethodContext) -> Policy:
     half_size = workspace_for(ctx.scene.task).half_size
     oracle = AnalyticPushModel(ctx.scene.num_objects, half_size, ctx.settings.oracle_contact_radius)
-    return _planner_controller(oracle, None, ctx)
+    return _planner_policy(oracle, None, ctx)
 
 
 def _kinet(objective: str, label: str) -> Method:
@@ -124,14 +112,13 @@ METHODS: dict[str, Method] = {
         _kinet("keypoints", "MPC on keypoint positions"),
         _kinet("keypoints_l2", "MPC on index-matched keypoint positions (L2)"),
         _kinet("keypoints_distance", "MPC on index-matched keypoint distances (not squared)"),
-        Method("random", "Random pushes", False, None, lambda ctx: RandomController(ctx.seeds)),
+        Method("random", "Random pushes", False, None, lambda ctx: RandomPolicy(ctx.seeds)),
         Method(
             "oracle",
             "Oracle MPC (GT state, analytic push model)",
             False,
             None,
             _oracle,
-            (OBJECT_POS,),
         ),
         Method(
             "model_mpc",

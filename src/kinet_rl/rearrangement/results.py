@@ -16,7 +16,7 @@ Summary = dict[str, dict[str, dict[str, Any]]]
 
 @dataclass
 class EpisodeResult:
-    """Outcome of one controller on one episode: ground truth, and the goal-image SSIM."""
+    """Outcome of one policy on one episode: ground truth, and the goal-image SSIM."""
 
     method: str
     seed: int

@@ -89,14 +89,9 @@ def run_jobs(
             episodes.append(make_episode(condition.scene, settings.task, job.seed))
         method = METHODS[method_name]
         seeds = tuple(job.seed for job in jobs)
-        controller = method.controller(MethodContext(model, condition.scene, settings, seeds))
+        policy = method.policy(MethodContext(model, condition.scene, settings, seeds))
         return run_episodes(
-            episodes,
-            controller,
-            method_name,
-            settings.task,
-            record=[job.record for job in jobs],
-            observes=method.observed(model),
+            episodes, policy, method_name, settings.task, record=[job.record for job in jobs]
         )
     finally:
         for episode in episodes:

@@ -106,7 +106,7 @@ class RearrangementSettings:
         episodes: Episodes per method in the comparison.
         methods: Methods of the comparison (names in ``kinet_rl.rearrangement.METHODS``).
         planner: :class:`GraphMPCPlanner` settings (the budget) of every planning method: the
-            learned-model controllers and the oracle plan with the same budget.
+            learned-model policies and the oracle plan with the same budget.
         oracle_contact_radius: Object-plus-pusher radius of the oracle's push model, metres.
         num_objects: Object counts of the generalization table (empty: skipped).
         geometries: Geometries of the generalization table.
