@@ -106,6 +106,11 @@ def test_run_writes_model_report_images_and_logs(smoke_run: Path) -> None:
     assert all(0 < mm < 1e3 for _, mm in steps_and_mm)
     model = KINetWorldModel.from_checkpoint(run / "kinet.pt", {"num_keypoints": 6})
     assert model.detector.num_keypoints == 6
+    # The experiment's validated planning travels with the model: eval.kinet_method's objective
+    # and eval.planner's budget (conf/eval/rearrange.yaml), and the scene it was trained on.
+    assert model.planning.objective == "keypoints_l2"
+    assert model.planning.planner["num_candidates"] == 64 and model.planning.planner["return_best"]
+    assert model.scene == SceneSettings(image_size=32)
 
 
 def test_tensorboard_run_shows_images_and_rearrangement_gif(smoke_run: Path) -> None:
@@ -179,6 +184,7 @@ def test_baseline_trains_through_the_same_pipeline(smoke_run: Path) -> None:
     assert checkpoint_scene(checkpoint) == SceneSettings(image_size=32)  # the smoke scene
     # The saved weights are the evaluated ones: they reproduce the run's forward errors.
     model = ObjectInteractionModel.from_checkpoint(checkpoint).eval()
+    assert model.planning.objective == "object_distance"  # its own: KINet's is not declared
     test = load_dataset(smoke_run / "data" / "smoke", "test")
     errors = forward_errors(model.object_rollout(), test, (1, 3), num_sequences=4)
     reproduced = {str(h): e["model"] for h, e in errors.items()}

@@ -93,6 +93,10 @@ class PushDataset:
     A variable-count dataset (collected with ``num_objects_range``) stores ``num_objects`` =
     N, the most objects an episode holds; its batches' per-object entries (``object_pos``,
     ``object_yaw``, ``object_shape``) are NaN for the objects beyond an episode's count.
+
+    A dataset without object state (pixels and pushes only, e.g. a robot's recordings imported
+    with ``python -m kinet_rl.import_data``) has ``num_objects`` None and batches without the
+    per-object entries; :meth:`check_keys` refuses it to a model that reads them.
     """
 
     path: Path | None  # None for in-memory episodes (:meth:`from_episodes`)
@@ -156,13 +160,15 @@ class PushDataset:
         """Reads episodes ``start:stop`` of the stored arrays [E, ...]."""
         self.episode_length = stored[ACTION].shape[1]
         self.image_size = stored[PIXELS].shape[2]
-        self.num_objects = stored[OBJECT_POS].shape[2]
+        positions = stored.get(OBJECT_POS, None)  # absent from datasets without object state
+        #: Objects per scene N, or None for a dataset without object state.
+        self.num_objects = None if positions is None else positions.shape[2]
         # Row views of the memory maps, indexed with index_select: one row per frame or push
         # (about 9x faster than advanced indexing of the [E, T+1, H, W, 3] tensor).
         self._frames = _rows(stored[PIXELS])  # [E * (T+1), H * W * 3]
         self._actions = _rows(stored[ACTION])  # [E * T, 4]
-        self._object_pos = _rows(stored[OBJECT_POS])  # [E * (T+1), N * 2]
-        self._object_yaw = _rows(stored[OBJECT_YAW])  # [E * (T+1), N]
+        self._object_pos = None if positions is None else _rows(positions)  # [E * (T+1), N * 2]
+        self._object_yaw = None if positions is None else _rows(stored[OBJECT_YAW])  # [.., N]
         shapes = stored.get(OBJECT_SHAPE, None)  # absent from datasets of older versions
         self._object_shape = None if shapes is None else shapes.as_subclass(torch.Tensor)
         counts = stored.get(OBJECT_COUNT, None)  # stored by variable-count datasets only
@@ -182,6 +188,15 @@ class PushDataset:
         missing = sorted(set(keys) - self.stored_keys)
         if not missing:
             return
+        if not self.has_object_state:
+            source = "these in-memory episodes" if self.path is None else f"dataset {self.path}"
+            raise DatasetMismatchError(
+                f"{user} needs {missing}, but {source} holds pixels and pushes only, no object "
+                f"state (e.g. a robot's recordings, imported). {user} learns from ground-truth "
+                "object state; train a model that learns from pixels alone on it (KINet: "
+                "model=kinet loss=kinet; V-CDN, Forw, ForwInv), or collect simulated data for "
+                f"{user}: {COLLECT_HINT}"
+            )
         if self.path is None:
             raise DatasetMismatchError(
                 f"{user} needs {missing}, which these in-memory episodes lack; assemble them "
@@ -211,6 +226,24 @@ class PushDataset:
             "env.num_objects=<N>."
         )
 
+    @property
+    def has_object_state(self) -> bool:
+        """Whether the episodes store object positions (a dataset of pixels and pushes only, e.g.
+        imported from a robot, does not)."""
+        return self._object_pos is not None
+
+    def _objects(self, rows: torch.Tensor) -> dict[str, torch.Tensor]:
+        """``{OBJECT_POS: [*R, N, 2], OBJECT_YAW: [*R, N]}`` at frame rows ``rows`` [*R], or
+        ``{}`` for a dataset without object state."""
+        if self._object_pos is None or self._object_yaw is None:
+            return {}
+        n = self.num_objects
+        flat = rows.reshape(-1)
+        return {
+            OBJECT_POS: self._object_pos.index_select(0, flat).view(*rows.shape, n, 2),
+            OBJECT_YAW: self._object_yaw.index_select(0, flat).view(*rows.shape, n),
+        }
+
     def _shapes(self, episode: torch.Tensor) -> dict[str, torch.Tensor]:
         """``{OBJECT_SHAPE: [B, N, 8]}`` of ``episode`` [B], or ``{}`` if the dataset has none."""
         if self._object_shape is None:
@@ -229,29 +262,31 @@ class PushDataset:
         Returns:
             TensorDict [B]: ``pixels_0``, ``pixels``, (``next``, ``pixels``) uint8 [B, H, W, 3];
             ``action`` [B, 4]; ``object_pos``, (``next``, ``object_pos``) [B, N, 2];
-            ``object_yaw``, (``next``, ``object_yaw``) [B, N]; ``object_shape`` [B, N, 8] (when
-            the dataset stores it); ``episode``, ``step`` int64 [B]. With ``horizon`` > 1 (``step + horizon`` within the
+            ``object_yaw``, (``next``, ``object_yaw``) [B, N] (when the dataset has object state);
+            ``object_shape`` [B, N, 8] (when the dataset stores it); ``episode``, ``step`` int64
+            [B]. With ``horizon`` > 1 (``step + horizon`` within the
             episode) also the ``horizon - 1`` pushes that follow: (``future``, ``action``)
             [B, horizon - 1, 4] and the frames after them, (``future``, ``pixels``)
             [B, horizon - 1, H, W, 3].
         """
-        batch, h, n = len(episode), self.image_size, self.num_objects
+        batch, h = len(episode), self.image_size
         times = torch.stack([torch.zeros_like(step), step, step + 1], dim=1)  # [B, 3]
         rows = self._frame_rows(episode[:, None], times)  # [B, 3]
         frames = self._frames.index_select(0, rows.reshape(-1)).view(batch, 3, h, h, 3)
-        pos = self._object_pos.index_select(0, rows[:, 1:].reshape(-1)).view(batch, 2, n, 2)
-        yaw = self._object_yaw.index_select(0, rows[:, 1:].reshape(-1)).view(batch, 2, n)
+        objects = self._objects(rows[:, 1:])  # [B, 2, N, ...] each, or none
         out = TensorDict(
             {
                 PIXELS_0: frames[:, 0],
                 PIXELS: frames[:, 1],
                 ACTION: self._actions.index_select(0, episode * self.episode_length + step),
-                OBJECT_POS: pos[:, 0],
-                OBJECT_YAW: yaw[:, 0],
+                **{key: value[:, 0] for key, value in objects.items()},
                 **self._shapes(episode),
                 EPISODE: episode,
                 STEP: step,
-                "next": {PIXELS: frames[:, 2], OBJECT_POS: pos[:, 1], OBJECT_YAW: yaw[:, 1]},
+                "next": {
+                    PIXELS: frames[:, 2],
+                    **{key: value[:, 1] for key, value in objects.items()},
+                },
             },
             batch_size=[batch],
         )
@@ -307,27 +342,26 @@ class PushDataset:
 
         Returns:
             TensorDict [B]: ``pixels`` uint8 [B, L+1, H, W, 3] (frames before each push and after
-            the last), ``action`` [B, L, 4], ``object_pos`` [B, L+1, N, 2], ``object_yaw``
-            [B, L+1, N], ``object_shape`` [B, N, 8] (when the dataset stores it), ``pixels_0``
+            the last), ``action`` [B, L, 4], ``object_pos`` [B, L+1, N, 2] and ``object_yaw``
+            [B, L+1, N] (when the dataset has object state), ``object_shape`` [B, N, 8] (when the
+            dataset stores it), ``pixels_0``
             [B, H, W, 3] (the episode's first frame), ``episode`` and ``step`` (first push) [B].
         """
         if not 1 <= length <= self.episode_length:
             raise ValueError(f"length must lie in [1, {self.episode_length}], got {length}.")
         episode = self._random_episodes(batch_size, generator)
         step = torch.randint(self.episode_length - length + 1, (batch_size,), generator=generator)
-        h, n = self.image_size, self.num_objects
+        h = self.image_size
         times = step[:, None] + torch.arange(length + 1)  # [B, L+1]
-        rows = self._frame_rows(episode[:, None], times).reshape(-1)  # [B * (L+1)]
+        frame_rows = self._frame_rows(episode[:, None], times)  # [B, L+1]
+        rows = frame_rows.reshape(-1)  # [B * (L+1)]
         first_rows = self._frame_rows(episode, torch.zeros_like(episode))  # [B]
         push_rows = (episode[:, None] * self.episode_length + times[:, :-1]).reshape(-1)
         return TensorDict(
             {
                 PIXELS: self._frames.index_select(0, rows).view(batch_size, length + 1, h, h, 3),
                 ACTION: self._actions.index_select(0, push_rows).view(batch_size, length, 4),
-                OBJECT_POS: self._object_pos.index_select(0, rows).view(
-                    batch_size, length + 1, n, 2
-                ),
-                OBJECT_YAW: self._object_yaw.index_select(0, rows).view(batch_size, length + 1, n),
+                **self._objects(frame_rows),
                 **self._shapes(episode),
                 PIXELS_0: self._frames.index_select(0, first_rows).view(batch_size, h, h, 3),
                 EPISODE: episode,

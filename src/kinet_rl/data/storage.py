@@ -17,6 +17,10 @@ Layout of ``<root>/<name>/``::
     metadata.json      written last, atomically: its presence marks the dataset complete;
                        ``arrays`` lists the stored arrays
 
+A dataset without object state (pixels and pushes only, imported from a robot's recordings by
+:mod:`kinet_rl.data.importing`) has no per-object array: its metadata records ``num_objects``
+null and ``arrays`` without them.
+
 Datasets collected before ``object_shape`` was stored have no ``arrays`` entry and no such file;
 they load for every model that does not need the shapes (see :data:`OPTIONAL_ARRAYS`). A
 variable-count dataset records ``num_objects_range`` ``[low, high]`` in its metadata
@@ -197,22 +201,30 @@ def mismatched_episodes(
 
 
 def episode_array_specs(
-    episode_length: int, image_size: int, num_objects: int, variable_object_count: bool = False
+    episode_length: int,
+    image_size: int,
+    num_objects: int | None,
+    variable_object_count: bool = False,
 ) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
     """Per-episode shape (without the leading E) and dtype of every stored array.
 
+    ``num_objects`` None: episodes without object state (pixels and pushes only, e.g. imported
+    from a robot's recordings; :mod:`kinet_rl.data.importing`), so no per-object array.
     ``variable_object_count`` adds the per-episode object count (``num_objects`` objects are
     then the most an episode holds).
     """
     t, h, n = episode_length, image_size, num_objects
-    specs = {
+    specs: dict[str, tuple[tuple[int, ...], torch.dtype]] = {
         PIXELS: ((t + 1, h, h, 3), torch.uint8),
         ACTION: ((t, 4), torch.float32),
-        OBJECT_POS: ((t + 1, n, 2), torch.float32),
-        OBJECT_YAW: ((t + 1, n), torch.float32),
-        OBJECT_SHAPE: ((n, 8), torch.float32),
-        "source_episode": ((), torch.int64),
     }
+    if n is not None:
+        specs |= {
+            OBJECT_POS: ((t + 1, n, 2), torch.float32),
+            OBJECT_YAW: ((t + 1, n), torch.float32),
+            OBJECT_SHAPE: ((n, 8), torch.float32),
+        }
+    specs["source_episode"] = ((), torch.int64)
     if variable_object_count:
         specs[OBJECT_COUNT] = ((), torch.int64)
     return specs
@@ -254,7 +266,8 @@ class EpisodeWriter:
         num_episodes: episodes the finished dataset holds (disk space is reserved up front).
         episode_length: pushes per episode T.
         image_size: frame side H = W.
-        num_objects: objects per scene N (with ``variable_object_count``, the most per scene).
+        num_objects: objects per scene N (with ``variable_object_count``, the most per scene);
+            None: episodes without object state (pixels, pushes and source index only).
         settings: JSON-able collection settings; a resumed run must present the same ones.
         variable_object_count: episodes hold up to ``num_objects`` objects: each commit's
             per-object arrays are NaN-padded and its object count is stored.
@@ -266,7 +279,7 @@ class EpisodeWriter:
         num_episodes: int,
         episode_length: int,
         image_size: int,
-        num_objects: int,
+        num_objects: int | None,
         settings: Mapping[str, Any],
         variable_object_count: bool = False,
     ) -> None:

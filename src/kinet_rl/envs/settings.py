@@ -10,6 +10,7 @@ from typing import Any
 from kinet_rl.config_schema import require, settings_from
 from kinet_rl.envs.blocks import BLOCK_SIZE_RANGES
 from kinet_rl.envs.scene import CAMERAS
+from kinet_rl.envs.workspace import workspace_for
 
 TASKS = ("blocks", "ycb")
 MAX_OBJECTS = 5
@@ -51,6 +52,10 @@ class SceneSettings:
     #: The YCB objects to draw from, by name (``None``: every object of the manifest). A scene
     #: of held-out objects differs from the training scene only here.
     ycb_objects: tuple[str, ...] | None = None
+    #: Half the side of the square workspace, metres, where it is not the task's: a robot's
+    #: dataset (``python -m kinet_rl.import_data``) states its own. None: the task's (0.20 m
+    #: blocks, 0.30 m YCB); see :attr:`half_size`.
+    workspace_half_size: float | None = None
 
     def __post_init__(self) -> None:
         for name, choices in (
@@ -76,6 +81,23 @@ class SceneSettings:
                 self.ycb_objects,
                 "null (every object) or a non-empty list of YCB object names",
             )
+        if self.workspace_half_size is not None:
+            require(
+                isinstance(self.workspace_half_size, numbers.Real)
+                and not isinstance(self.workspace_half_size, bool)
+                and 0 < self.workspace_half_size < float("inf"),
+                "workspace_half_size",
+                self.workspace_half_size,
+                "null (the task's workspace) or metres > 0",
+            )
+
+    @property
+    def half_size(self) -> float:
+        """Half the side of the workspace in metres: :attr:`workspace_half_size` where given,
+        else the task's (:func:`~kinet_rl.envs.workspace.workspace_for`)."""
+        if self.workspace_half_size is not None:
+            return float(self.workspace_half_size)
+        return workspace_for(self.task).half_size
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any]) -> SceneSettings:
@@ -84,5 +106,9 @@ class SceneSettings:
         return settings_from(cls, {k: v for k, v in values.items() if k in names})
 
     def as_dict(self) -> dict[str, Any]:
-        """Plain-container form (for JSON and checkpoints)."""
-        return asdict(self)
+        """Plain-container form (for JSON and checkpoints); ``workspace_half_size`` only where
+        given, so a simulated scene's form is also :func:`~kinet_rl.envs.make_env`'s arguments."""
+        values = asdict(self)
+        if values["workspace_half_size"] is None:
+            del values["workspace_half_size"]
+        return values

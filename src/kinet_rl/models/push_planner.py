@@ -13,7 +13,6 @@ from tensordict import TensorDict, TensorDictBase
 from torch import Tensor
 
 from kinet_rl.envs.settings import SceneSettings
-from kinet_rl.envs.workspace import workspace_for
 from kinet_rl.keys import ACTION, GOAL_KP_POS, GOAL_PIXELS, KP_POS, PIXELS
 from kinet_rl.planners.graph_mpc import GraphMPCPlanner
 from kinet_rl.planners.world_model import PlanningInterface, PushWorldModelEnv
@@ -82,7 +81,8 @@ class PushPlanner:
             ``model.capabilities.objectives``.
         planner: All :class:`GraphMPCPlanner` settings (default ``model.planning.planner``).
         workspace_half_size: Half the side of the square workspace, metres (default: that of
-            ``model.scene``'s task; 0.20 blocks, 0.30 YCB).
+            ``model.scene``: the one its dataset stated (a robot's, imported), else its task's;
+            0.20 blocks, 0.30 YCB).
         seed: Seeds the planner's sampling for reproducible pushes (None: global torch RNG); a
             sequence of seeds, one per scene of :meth:`next_pushes`, samples for each scene what
             a planner seeded with its seed alone would.
@@ -103,7 +103,7 @@ class PushPlanner:
                     "The model does not say which scene it was trained on (it was not loaded from "
                     "a checkpoint); pass workspace_half_size= in metres (0.20 blocks, 0.30 YCB)."
                 )
-            workspace_half_size = workspace_for(scene.task).half_size
+            workspace_half_size = scene.half_size
         if not workspace_half_size > 0:
             raise ValueError(f"workspace_half_size must be > 0 metres, got {workspace_half_size}.")
         self.objective = objective or model.planning.objective
