@@ -114,6 +114,19 @@ def directory_lock(path: str | os.PathLike, activity: str) -> Iterator[Path]:
         os.close(fd)  # releases the lock
 
 
+def wait_for_directory(path: str | os.PathLike) -> None:
+    """Blocks until no process holds :func:`directory_lock` on ``path`` (returns at once if none
+    does)."""
+    lock = Path(path) / LOCK_FILE
+    if not lock.exists():
+        return
+    fd = os.open(lock, os.O_RDWR)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)  # waits for the holder
+    finally:
+        os.close(fd)
+
+
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:
     """Writes ``text`` atomically."""
     with atomic_write(path, "w") as f:

@@ -38,7 +38,7 @@ from kinet_rl.config_schema import target_arguments
 from kinet_rl.data.collection import assemble_episode, seeded_env
 from kinet_rl.data.dataset import PushDataset
 from kinet_rl.data.policy import RandomPushPolicy, read_workspace_half_size
-from kinet_rl.data.storage import stored_episodes
+from kinet_rl.data.storage import imported_metadata, stored_episodes
 from kinet_rl.devices import resolve_device
 from kinet_rl.envs import make_env
 from kinet_rl.pipeline import ExperimentSettings, dataset_jobs
@@ -139,6 +139,7 @@ class DatasetPlan:
         complete: Whether it is marked complete (nothing to collect).
         num_workers: Collection workers.
         pushes: Pushes per episode.
+        imported: Whether it was imported (a robot's pushes: never collected).
     """
 
     name: str
@@ -147,6 +148,7 @@ class DatasetPlan:
     complete: bool
     num_workers: int
     pushes: int
+    imported: bool = False
 
     @property
     def episodes_left(self) -> int:
@@ -156,6 +158,8 @@ class DatasetPlan:
     @property
     def status(self) -> str:
         """``complete``, ``partial (N done)`` or ``new``."""
+        if self.imported:
+            return "imported"
         if self.complete:
             return "complete"
         return f"partial ({self.stored:,} done)" if self.stored else "new"
@@ -185,7 +189,15 @@ class RunPlan:
     def of(cls, settings: ExperimentSettings, run_dir: Path) -> RunPlan:
         """The plan of ``settings`` in ``run_dir``, reading what is already on disk."""
         datasets = []
-        for job in dataset_jobs(settings.env, settings.data):
+        jobs = dataset_jobs(settings.env, settings.data)
+        imported = imported_metadata(jobs[0].path)
+        if imported is not None:  # a robot's pushes: trained on as they are, nothing collected
+            name, episodes = jobs[0].name, imported["num_episodes"]
+            datasets.append(
+                DatasetPlan(name, episodes, episodes, True, 0, imported["episode_length"], True)
+            )
+            jobs = []
+        for job in jobs:
             stored, complete = stored_episodes(job.path)
             datasets.append(
                 DatasetPlan(
@@ -220,6 +232,12 @@ class RunPlan:
         device = resolve_device(s.device)
         lines = [f"Plan of {s.name} (run directory {self.run_dir}, training on {device}):"]
         for dataset in self.datasets:
+            if dataset.imported:
+                lines.append(
+                    f"  {dataset.name}: {dataset.num_episodes:,} episodes x {dataset.pushes} "
+                    "pushes, imported (nothing to collect)"
+                )
+                continue
             workers = dataset.num_workers
             at_once = f", {cores} at a time on {cores} cores" if workers > cores else ""
             line = (
@@ -250,6 +268,13 @@ class RunPlan:
         text = f"forward error at {horizons} pushes on {report.num_sequences} test sequences"
         model_class, _ = target_arguments(self.settings.model_config, "model")
         episodes = report.rearrangement_episodes
+        if self.datasets[0].imported:  # no object state, no simulator of its scene
+            if not model_class.capabilities.keypoints:
+                return "validation losses only (no object state, no keypoints)"
+            return (
+                f"reconstruction error, keypoint self-consistency at {horizons} pushes on "
+                f"{report.num_sequences} test sequences (no object state)"
+            )
         if model_class.capabilities.keypoints:
             text = f"keypoint accuracy, {text}"
         if episodes and plans_every_method(model_class.capabilities, self.settings.rearrangement):

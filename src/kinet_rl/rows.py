@@ -50,11 +50,6 @@ class Row:
     planner_label: str | None = None
     floor: bool = False
 
-    @property
-    def model_file(self) -> str:
-        """The file of its trained model in a run directory."""
-        return self.model.model_file
-
 
 _GT = "MPC on GT goal distance"
 _FEATURES = "MPC on goal-image feature distance"
@@ -90,16 +85,6 @@ ROWS: dict[str, Row] = {
         ),
     )
 }
-
-
-def row_of_model(model_class: type) -> Row:
-    """The first row whose model is ``model_class`` (its label and model file)."""
-    for row in ROWS.values():
-        if row.model is model_class:
-            return row
-    raise ValueError(
-        f"{model_class.__name__} is no model of the comparison rows; rows: {list(ROWS)}."
-    )
 
 
 def load_trained_model(path: str | os.PathLike) -> Any:

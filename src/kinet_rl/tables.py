@@ -26,13 +26,13 @@ import logging
 import re
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, cast
 
 import hydra
+import torch
 from hydra import compose
-from hydra.core.hydra_config import HydraConfig
 from hydra.utils import get_class, instantiate
 from omegaconf import DictConfig, OmegaConf
 
@@ -74,6 +74,10 @@ from kinet_rl.rows import ROWS
 logger = logging.getLogger(__name__)
 
 CAMERAS = ("top", "side")
+#: The sweep job (``row=references``) of random pushes and the oracle on the MPC episodes.
+REFERENCES = "references"
+#: Keys of the root config besides the ``tables`` group (``conf/tables.yaml``).
+ROOT_KEYS = ("tables", "row", "seed", "aggregate", "threads", "out_dir")
 #: The tables' scenes: ``task`` of the rows' experiments, and how the tables name it.
 TASKS = {"blocks": "BlockObjs", "ycb": "YCBObjs"}
 #: What a planner budget's name may be (it is part of file names, e.g. ``tables_mpc_64x3.json``).
@@ -151,6 +155,35 @@ class TablesSettings:
         return settings_from(cls, values, "tables")
 
 
+@dataclass(frozen=True)
+class SweepJob:
+    """What one invocation does (``conf/tables.yaml``): one ``row`` and ``seed`` of a sweep, or
+    with no row every row and then the tables (``aggregate``: the tables from finished rows only).
+
+    Raises:
+        ConfigError: A row or seed that the scale does not have, named.
+    """
+
+    row: str | None = None
+    seed: int | None = None
+    aggregate: bool = False
+    threads: int | None = None
+
+    def check(self, tables: TablesSettings) -> None:
+        """Raises ``ConfigError`` unless the row and seed are the scale's."""
+        rows = [*tables.models, REFERENCES]
+        require(self.row is None or self.row in rows, "row", self.row, f"one of {rows}")
+        seeds = list(tables.seeds)
+        require(self.seed is None or self.seed in seeds, "seed", self.seed, f"one of {seeds}")
+        require(
+            self.row is None or not self.aggregate,
+            "aggregate",
+            self.aggregate,
+            "false for a sweep job (row=...); aggregate after the sweep, without row",
+        )
+        require(self.threads is None or self.threads >= 1, "threads", self.threads, "at least 1")
+
+
 def experiment_name(model: str, camera: str, task: str = "blocks") -> str:
     """The experiment of a table row, e.g. ``blocks_topview_determ``."""
     if model not in ROWS or camera not in CAMERAS or task not in TASKS:
@@ -208,19 +241,30 @@ def load_model(cfg: DictConfig, run_dir: Path) -> Any:
     return model.cpu().eval()
 
 
-def _cached(path: Path, compute, settings: Mapping[str, Any] | None = None) -> Any:
+class NotRun(Exception):
+    """A stage of a row (or the references) has not run: with ``run=False`` it is not run here."""
+
+
+def _cached(
+    path: Path, compute, settings: Mapping[str, Any] | None = None, run: bool = True
+) -> Any:
     """The JSON at ``path``, computed and written first if missing (always read back: str keys).
 
     With ``settings`` the file also stores them, and is recomputed when they changed (e.g. an
-    MPC result of another protocol or budget is not reused).
+    MPC result of another protocol or budget is not reused). With ``run=False`` a missing or
+    outdated file raises :class:`NotRun` instead of being computed.
     """
     if settings is None:
         if not path.is_file():
+            if not run:
+                raise NotRun(path)
             atomic_write_json(path, compute())
         return json.loads(path.read_text())
     settings = json.loads(json.dumps(settings))  # the form it is read back in
     stored = json.loads(path.read_text()) if path.is_file() else {}
     if stored.get("settings") != settings:
+        if not run:
+            raise NotRun(path)
         if stored:
             logger.info("Recomputing %s: its evaluation settings changed", path)
         stored = {"settings": settings, "value": compute()}
@@ -257,16 +301,24 @@ def run_dir_of(out_dir: Path, exp_name: str, seed: int) -> Path:
 
 
 def run_row(
-    tables: TablesSettings, model: str, camera: str, out_dir: Path, seed: int = 0
+    tables: TablesSettings,
+    model: str,
+    camera: str,
+    out_dir: Path,
+    seed: int = 0,
+    run: bool = True,
 ) -> dict[str, Any]:
     """Trains (unless finished) and evaluates one row and seed; returns its table entries.
 
     Forward errors use the same test sequences (seed 0) for every row and training seed; the MPC
-    evaluation runs for the first training seed only.
+    evaluation runs for the first training seed only. With ``run=False`` nothing is trained or
+    evaluated: a stage that has not run raises :class:`NotRun`.
     """
     cfg = row_config(tables, model, camera, seed)
     run_dir = run_dir_of(out_dir, cfg.exp_name, seed)
     if not (run_dir / "results.json").is_file():
+        if not run:
+            raise NotRun(run_dir)
         start = time.monotonic()
         logger.info("Training %s in %s", cfg.exp_name, run_dir)
         run_experiment(
@@ -295,7 +347,8 @@ def run_row(
             floor=floor,
         )
 
-    row: dict[str, Any] = {"forward": _cached(run_dir / "tables_forward.json", forward), "mpc": {}}
+    forward_errors_of_row = _cached(run_dir / "tables_forward.json", forward, run=run)
+    row: dict[str, Any] = {"forward": forward_errors_of_row, "mpc": {}}
     if camera == tables.mpc_camera and seed == tables.seeds[0]:
         kinet_method = rearrangement_settings(cfg, eval_overrides).kinet_method
         method = ROWS[model].method or kinet_method
@@ -317,16 +370,22 @@ def run_row(
                 return {cond: by_method[method] for cond, by_method in summary.items()}
 
             key = {"rearrangement": settings.as_dict(), "generalization": generalization}
-            row["mpc"][budget] = _cached(run_dir / f"tables_mpc_{budget}.json", mpc, key)
+            row["mpc"][budget] = _cached(run_dir / f"tables_mpc_{budget}.json", mpc, key, run)
     return row
 
 
-def references(
-    tables: TablesSettings, out_dir: Path, budget: str
-) -> tuple[dict[str, Any], RearrangementSettings]:
-    """Random pushes and the oracle on the MPC table's episodes at ``budget``, and the settings."""
+def reference_settings(tables: TablesSettings, budget: str) -> RearrangementSettings:
+    """The rearrangement settings of random pushes and the oracle at ``budget``."""
     cfg = row_config(tables, tables.models[0], tables.mpc_camera)
-    settings = rearrangement_settings(cfg, tables.eval, ["random", "oracle"], budget, tables)
+    return rearrangement_settings(cfg, tables.eval, ["random", "oracle"], budget, tables)
+
+
+def references(
+    tables: TablesSettings, out_dir: Path, budget: str, run: bool = True
+) -> tuple[dict[str, Any], RearrangementSettings]:
+    """Random pushes and the oracle on the MPC table's episodes at ``budget``, and the settings
+    (with ``run=False``, :class:`NotRun` if they have not run)."""
+    settings = reference_settings(tables, budget)
 
     def compute() -> dict[str, Any]:
         summary = evaluate_rearrangement(
@@ -334,14 +393,15 @@ def references(
         )
         return summary["summary"]["comparison"]
 
-    stats = _cached(out_dir / f"references_{budget}.json", compute, settings.as_dict())
+    stats = _cached(out_dir / f"references_{budget}.json", compute, settings.as_dict(), run)
     return stats, settings
 
 
-def build_tables(tables: TablesSettings, out_dir: Path) -> Path:
+def build_tables(tables: TablesSettings, out_dir: Path, run: bool = True) -> Path:
     """Checks every row's config, then (holding ``out_dir``'s lock) runs every row (resuming) and
-    writes ``tables.md`` and one ``mpc_curves_<budget>.png`` per planner budget; returns the
-    markdown path (needs an initialised Hydra).
+    writes ``tables.md``, ``tables.json`` and one ``mpc_curves_<budget>.png`` per planner budget;
+    returns the markdown path (needs an initialised Hydra). With ``run=False`` (after a sweep)
+    nothing runs: the tables hold the finished rows and list the ones still missing.
 
     Raises:
         ConfigError: A row's config is invalid (nothing is written).
@@ -349,10 +409,27 @@ def build_tables(tables: TablesSettings, out_dir: Path) -> Path:
     """
     check_rows(tables)
     with directory_lock(out_dir, "building the comparison tables"):
-        return _build_tables(tables, out_dir)
+        return _build_tables(tables, out_dir, run)
 
 
-def _build_tables(tables: TablesSettings, out_dir: Path) -> Path:
+def run_job(tables: TablesSettings, job: SweepJob, out_dir: Path) -> None:
+    """One job of a sweep: a row (every camera; ``job.seed`` or every seed) or the references,
+    each resuming what it finished before (needs an initialised Hydra)."""
+    if job.threads is not None:
+        torch.set_num_threads(job.threads)
+    seeds = tables.seeds if job.seed is None else (job.seed,)
+    if job.row == REFERENCES:
+        for budget in tables.mpc_budgets:
+            references(tables, out_dir, budget)
+        return
+    check_rows(replace(tables, models=(job.row,), seeds=seeds))
+    for seed in seeds:
+        for camera in tables.cameras:
+            logger.info("Sweep job: %s, %s view, seed %d", job.row, camera, seed)
+            run_row(tables, job.row, camera, out_dir, seed)
+
+
+def _build_tables(tables: TablesSettings, out_dir: Path, run: bool = True) -> Path:
     forward: dict[str, dict[str, list[Any]]] = {}
     run_dirs: dict[str, dict[str, list[Path]]] = {}
     budgets = list(tables.mpc_budgets)
@@ -360,9 +437,14 @@ def _build_tables(tables: TablesSettings, out_dir: Path) -> Path:
     cells: dict[str, dict[str, Any]] = {}
     seeds = list(tables.seeds)
     rows = [(m, c, s) for s in seeds for c in tables.cameras for m in tables.models]
+    missing: list[str] = []
     for i, (model, camera, seed) in enumerate(rows, start=1):
         logger.info("Row %d/%d: %s, %s view, seed %d", i, len(rows), model, camera, seed)
-        row = run_row(tables, model, camera, out_dir, seed)
+        try:
+            row = run_row(tables, model, camera, out_dir, seed, run)
+        except NotRun:
+            missing.append(f"row={model} seed={seed} ({camera} camera)")
+            continue
         forward.setdefault(model, {}).setdefault(camera, []).append(row["forward"])
         run_dirs.setdefault(camera, {}).setdefault(ROWS[model].label, []).append(
             run_dir_of(out_dir, experiment_name(model, camera, tables.task), seed)
@@ -373,7 +455,12 @@ def _build_tables(tables: TablesSettings, out_dir: Path) -> Path:
                 cells[model] = {k: v for k, v in by_condition.items() if k != "comparison"}
     mpc_sections, settings_of = [], {}
     for budget in budgets:
-        reference_stats, settings = settings_of[budget] = references(tables, out_dir, budget)
+        try:
+            reference_stats, settings = references(tables, out_dir, budget, run)
+        except NotRun:
+            missing.append(f"row={REFERENCES} (random pushes and the oracle at {budget})")
+            reference_stats, settings = {}, reference_settings(tables, budget)
+        settings_of[budget] = reference_stats, settings
         mpc[budget].update(reference_stats)
         plot = plot_mpc_curves(mpc[budget], out_dir / f"mpc_curves_{budget}.png")
         mpc_sections += [
@@ -449,24 +536,57 @@ def _build_tables(tables: TablesSettings, out_dir: Path) -> Path:
                 settings.geometries,
             ),
             "",
+            *_missing_section(missing, tables.scale),
         ]
+    )
+    atomic_write_json(
+        out_dir / "tables.json",
+        {"forward": forward, "mpc": mpc, "generalization": cells, "missing": missing},
     )
     path = out_dir / "tables.md"
     atomic_write_text(path, text)
     logger.info("Tables written to %s", path)
+    if missing:
+        logger.warning("Rows not yet run (%d): %s", len(missing), "; ".join(missing))
     return path
+
+
+def _missing_section(missing: list[str], scale: str) -> list[str]:
+    if not missing:
+        return []
+    return [
+        "## Not yet run",
+        "",
+        "These rows have not finished; their cells are empty above. Run them, e.g. "
+        f"`python -m kinet_rl.tables -m tables={scale} row=<model> seed=<seed>`:",
+        "",
+        *[f"* {row}" for row in missing],
+        "",
+    ]
 
 
 @exit_on_interrupt("kinet_rl.tables")
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="tables")
 def main(cfg: DictConfig) -> None:
     """Entry point."""
-    out_dir = Path(HydraConfig.get().runtime.output_dir)
     container = to_dict(cfg)
-    check_keys(container, ["tables"])
-    path = build_tables(TablesSettings.from_container(container["tables"]), out_dir)
+    check_keys(container, list(ROOT_KEYS))
+    tables = TablesSettings.from_container(container["tables"])
+    job = settings_from(
+        SweepJob, {k: container[k] for k in ("row", "seed", "aggregate", "threads")}, ""
+    )
+    job.check(tables)
+    out_dir = Path(container["out_dir"])
+    if job.row is not None:
+        run_job(tables, job, out_dir)
+        return
+    path = build_tables(tables, out_dir, run=not job.aggregate)
     print(path.read_text())
 
 
 if __name__ == "__main__":
-    main()
+    # Run the importable module's main, not this __main__ copy's: a launcher (joblib, submitit)
+    # pickles the job function, and functions and classes of __main__ do not unpickle in its jobs.
+    from kinet_rl import tables
+
+    tables.main()

@@ -14,7 +14,7 @@ import pytest
 import kinet_rl
 
 SRC = Path(kinet_rl.__file__).resolve().parent
-ENTRY_POINTS = {"train", "collect", "evaluate", "tables", "plan"}
+ENTRY_POINTS = {"train", "collect", "evaluate", "tables", "plan", "import_data"}
 #: Layers from the bottom up; a module may import only from its own layer or layers below.
 LAYERS = [
     {"keys", "atomic", "devices", "configs", "config_schema", "interrupts", "stats"},

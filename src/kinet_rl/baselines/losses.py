@@ -55,12 +55,14 @@ class ImageForwardLoss(LossModule):
     the features from collapsing (other samples' next frames are the negatives). ``loss_inv``
     (ForwInv only): ``|f_inv(z_t, z_t+1) - u_t|^2``. ``loss_probe``: the evaluation probe's
     squared error on ground-truth displacements (workspace units) from *detached* features; it
-    trains only the probe. Each entry is already weighted.
+    trains only the probe, and only on batches with object positions (a robot's recordings
+    without object state train the rest). Each entry is already weighted.
 
     Keys:
         Reads a ``[B]`` batch with ``PIXELS``, ``("next", PIXELS)`` ``[B, H, W, 3]``, ``ACTION``
-        ``[B, 4]``, ``OBJECT_POS`` and ``("next", OBJECT_POS)`` ``[B, N, 2]`` (probe only).
-        Returns scalars ``loss_fwd``, ``loss_ctr``, ``loss_probe`` and, for ForwInv, ``loss_inv``.
+        ``[B, 4]`` and, where the data have them, ``OBJECT_POS`` and ``("next", OBJECT_POS)``
+        ``[B, N, 2]`` (probe only). Returns scalars ``loss_fwd``, ``loss_ctr``, ``loss_probe``
+        (with object positions) and, for ForwInv, ``loss_inv``.
 
     Args:
         world_model: An :class:`ImageForwardModel` (or :class:`ImageForwardInverseModel`).
@@ -103,10 +105,8 @@ class ImageForwardLoss(LossModule):
 
     def forward(self, tensordict: TensorDictBase) -> TensorDict:
         """Computes the weighted losses (see class docstring)."""
-        pixels, next_pixels, action, pos, next_pos = _require(
-            tensordict,
-            [PIXELS, NEXT_PIXELS, ACTION, OBJECT_POS, NEXT_OBJECT_POS],
-            type(self.world_model).__name__,
+        pixels, next_pixels, action = _require(
+            tensordict, [PIXELS, NEXT_PIXELS, ACTION], type(self.world_model).__name__
         )
         model = self.world_model
         feat, next_feat = model.encode(torch.cat([pixels, next_pixels])).chunk(2)
@@ -119,6 +119,11 @@ class ImageForwardLoss(LossModule):
         if model.has_inverse_model:
             inferred = model.infer_action(feat, next_feat)
             losses["loss_inv"] = self.inv_weight * (inferred - action).pow(2).sum(-1).mean()
+        if tensordict.get(OBJECT_POS, None) is None:  # no object state: nothing to probe
+            return TensorDict(losses, batch_size=[])
+        pos, next_pos = _require(
+            tensordict, [OBJECT_POS, NEXT_OBJECT_POS], f"{type(model).__name__} probe"
+        )
         scale = model.position_scale
         motion = model.probe(feat.detach(), next_feat.detach(), pos / scale)
         probe_error = (motion - (next_pos - pos) / scale).pow(2).sum(-1).mean()

@@ -235,7 +235,7 @@ class PushDataset:
     def _objects(self, rows: torch.Tensor) -> dict[str, torch.Tensor]:
         """``{OBJECT_POS: [*R, N, 2], OBJECT_YAW: [*R, N]}`` at frame rows ``rows`` [*R], or
         ``{}`` for a dataset without object state."""
-        if self._object_pos is None or self._object_yaw is None:
+        if self._object_pos is None or self._object_yaw is None or self.num_objects is None:
             return {}
         n = self.num_objects
         flat = rows.reshape(-1)

@@ -62,6 +62,9 @@ COLLECT_HINT = "python -m kinet_rl.collect [+exp=<experiment>] data.root=<root> 
 OPTIONAL_ARRAYS = (OBJECT_SHAPE,)
 #: ``hashlib`` name of the per-episode digests in ``progress.json``'s ``checksums``.
 CHECKSUM_ALGORITHM = "sha256"
+#: ``metadata.json`` entry of an imported dataset: where it came from and how it was converted
+#: (:mod:`kinet_rl.data.importing`); collected datasets have none.
+IMPORT_RECORD = "imported"
 
 
 class DatasetError(Exception):
@@ -124,6 +127,15 @@ def stored_episodes(path: Path) -> tuple[int, bool]:
     if (path / PROGRESS_FILE).exists():
         return int(read_json(path / PROGRESS_FILE)["committed"]), False
     return 0, False
+
+
+def imported_metadata(path: Path) -> dict[str, Any] | None:
+    """The metadata of the complete dataset folder ``path`` if it was imported (it has an
+    :data:`IMPORT_RECORD`), else None (collected, partial or missing)."""
+    if not (path / METADATA_FILE).exists():
+        return None
+    metadata = read_json(path / METADATA_FILE)
+    return metadata if metadata.get(IMPORT_RECORD) is not None else None
 
 
 def open_episodes(path: Path) -> TensorDict:

@@ -16,6 +16,11 @@ from kinet_rl.atomic import atomic_write_text
 from kinet_rl.config_schema import at_least, require
 from kinet_rl.devices import model_device
 from kinet_rl.envs.geometry import SceneGeometry, normalised_to_pixels
+from kinet_rl.evaluation.consistency import (
+    consistency_table,
+    keypoint_consistency,
+    reconstruction_error,
+)
 from kinet_rl.evaluation.forward import (
     forward_errors,
     forward_table,
@@ -23,7 +28,7 @@ from kinet_rl.evaluation.forward import (
     keypoint_accuracy,
 )
 from kinet_rl.evaluation.images import draw_keypoints, image_grid, save_png, upscale
-from kinet_rl.keys import ACTION, NEXT_PIXELS, PIXELS, PIXELS_0
+from kinet_rl.keys import ACTION, NEXT_PIXELS, OBJECT_POS, PIXELS, PIXELS_0
 from kinet_rl.training.loggers import log_media
 
 log = logging.getLogger(__name__)
@@ -60,6 +65,13 @@ class ReportSettings:
         )
         at_least(self, 1, "num_sequences")
         at_least(self, 0, "rearrangement_episodes")
+
+
+def has_object_state(dataset) -> bool:
+    """Whether ``dataset``'s batches carry object positions (a robot's recordings, imported,
+    hold pixels and pushes only). Samples one transition with its own generator."""
+    batch = dataset.sample(1, torch.Generator().manual_seed(0))
+    return batch.get(OBJECT_POS, None) is not None
 
 
 def hit_radius(image_size: int) -> float:
@@ -113,6 +125,11 @@ def write_summaries(
 class TrainingReport:
     """Periodic and final evaluation of a training run (KINet or a baseline).
 
+    On a dataset with object state it scores forward prediction in millimetres (and keypoint
+    accuracy); on one without (pixels and pushes only, e.g. a robot's recordings), what the
+    images alone measure: for keypoint models the reconstruction error and the keypoint
+    self-consistency in pixels (:mod:`kinet_rl.evaluation.consistency`).
+
     Args:
         run_dir: The run directory (images and ``report.md`` go there).
         exp_name: Experiment name, for the report's title.
@@ -156,7 +173,11 @@ class TrainingReport:
 
     def on_validate(self, step: int) -> dict[str, float]:
         """The 1-push forward error (mm) on validation sequences (the learning curve), and for
-        keypoint models the keypoint accuracy and image summaries of the step."""
+        keypoint models the keypoint accuracy and image summaries of the step. Without object
+        state: for keypoint models the 1-push keypoint self-consistency (pixels) and the image
+        summaries."""
+        if not has_object_state(self.val):
+            return self._validate_images(step)
         rollout = self.model.object_rollout(self.geometry)
         errors = forward_errors(rollout, self.val, (1,), VALIDATION_SEQUENCES)[1]
         scores = {"val/forward_error_1_mm": 1e3 * errors["model"]}
@@ -165,6 +186,17 @@ class TrainingReport:
             self.write_images(self.val, "val", f"step{step:06d}", step)
             scores["val/keypoint_accuracy"] = self.accuracy(self.val)
         return scores
+
+    def _validate_images(self, step: int) -> dict[str, float]:
+        """:meth:`on_validate` on a validation split without object state."""
+        if not self.has_keypoints:
+            return {}
+        self.write_images(self.val, "val", f"step{step:06d}", step)
+        one = keypoint_consistency(self.model, self.val, (1,), VALIDATION_SEQUENCES)[1]
+        return {
+            "val/keypoint_consistency_1_px": one["model"],
+            "val/keypoint_no_motion_1_px": one["no_motion"],
+        }
 
     def write_images(self, dataset, split: str, tag: str, step: int) -> list[Path]:
         """Writes the image summaries of ``dataset`` (:func:`write_summaries`) and logs them as
@@ -177,7 +209,10 @@ class TrainingReport:
 
     def score(self, dataset) -> tuple[dict, list[str]]:
         """Forward errors (and for keypoint models keypoint accuracy and image errors) on
-        ``dataset``: its numbers and its report sections."""
+        ``dataset``: its numbers and its report sections (:meth:`score_images` for a dataset
+        without object state)."""
+        if not has_object_state(dataset):
+            return self.score_images(dataset)
         rollout = self.model.object_rollout(self.geometry)
         floor = self.model.detector_floor(self.geometry) if self.has_keypoints else None
         errors = forward_errors(rollout, dataset, self.horizons, self.num_sequences, floor=floor)
@@ -204,6 +239,41 @@ class TrainingReport:
             "on the table (protocol: docs/kinet.md).\n"
         )
         sections.append(forward_table(errors, image_mse, self.model_name) + "\n")
+        return results, sections
+
+    def score_images(self, dataset) -> tuple[dict, list[str]]:
+        """What ``dataset``'s images alone measure, for a dataset without object state: for
+        keypoint models the reconstruction error, the keypoint self-consistency after each
+        horizon's pushes beside no motion (pixels) and the predicted frames' image errors; its
+        numbers and its report sections."""
+        results: dict = {"object_state": False}
+        sections = [
+            "No object state in these episodes (pixels and pushes only): forward errors in "
+            "millimetres need object positions, so what follows is measured on the images.\n"
+        ]
+        if not self.has_keypoints:
+            sections.append(
+                f"{self.model_name} has no keypoints and no decoder to score against the "
+                "images; its validation losses (the run's logs) are its measure here.\n"
+            )
+            return results, sections
+        size = self.geometry.image_size
+        rec = reconstruction_error(self.model, dataset, self.num_sequences)
+        consistency = keypoint_consistency(self.model, dataset, self.horizons, self.num_sequences)
+        image_mse = image_prediction_errors(self.model, dataset, self.horizons, self.num_sequences)
+        results.update(
+            reconstruction_mse=rec, keypoint_consistency_px=consistency, image_mse=image_mse
+        )
+        sections += [
+            f"**Reconstruction error: {rec:.4f}** (mean squared error of rebuilding a frame from "
+            "the episode's first frame and the frame's own keypoints, pixel values in [0, 1]).\n",
+            "Keypoint self-consistency: open-loop rollouts of the logged pushes; the keypoints "
+            "predicted after each number of pushes against those the detector finds in the true "
+            f"frame then, mean distance in pixels of the {size} px images; no motion: the "
+            "keypoints detected at the start, left where they are. Image MSE: the frame rendered "
+            "from the predicted keypoints against the true frame.\n",
+            consistency_table(consistency, image_mse, self.model_name) + "\n",
+        ]
         return results, sections
 
     def final(self, step: int) -> dict:

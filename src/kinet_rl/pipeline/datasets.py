@@ -4,16 +4,20 @@ order (:func:`dataset_jobs`), and their collection (:func:`collect_datasets`).""
 from __future__ import annotations
 
 import functools
+import logging
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from kinet_rl.atomic import DirectoryInUseError, wait_for_directory
 from kinet_rl.data import collect_dataset
 from kinet_rl.envs import make_env
 
 #: Env settings a dataset must match to train a model of the experiment.
 DATASET_ENV_KEYS = ("task", "camera", "image_size", "num_objects")
+
+log = logging.getLogger(__name__)
 
 
 def dataset_path(data: Mapping[str, Any]) -> Path:
@@ -74,9 +78,18 @@ class DatasetJob:
         return [k for k in DATASET_ENV_KEYS if self.env[k] != other.env[k]]
 
     def collect(self) -> Path:
-        """Collects the dataset (skipped when complete, resumed when partial); returns its folder."""
+        """Collects the dataset (skipped when complete, resumed when partial); returns its folder.
+
+        When another process is collecting it (a sweep's jobs that share a dataset), this one
+        waits for it, then finds the dataset complete (or resumes what it left).
+        """
         env_fn = functools.partial(make_env, **self.env)
-        return collect_dataset(env_fn=env_fn, env_config=dict(self.env), **self.arguments)
+        while True:
+            try:
+                return collect_dataset(env_fn=env_fn, env_config=dict(self.env), **self.arguments)
+            except DirectoryInUseError as busy:
+                log.info("%s Waiting for it.", busy)
+                wait_for_directory(self.path)
 
 
 def dataset_jobs(env: Mapping[str, Any], data: Mapping[str, Any]) -> list[DatasetJob]:

@@ -18,6 +18,7 @@ from torchrl.record.loggers import Logger
 from kinet_rl.atomic import atomic_write_json, directory_lock
 from kinet_rl.data import DatasetMismatchError, PushDataset, load_dataset
 from kinet_rl.data.dataset import ALL_SPLITS
+from kinet_rl.data.storage import imported_metadata
 from kinet_rl.envs.geometry import SceneGeometry
 from kinet_rl.evaluation.report import TrainingReport
 from kinet_rl.models.checkpointing import ConfigCheckpointMixin
@@ -148,19 +149,29 @@ def _train_and_evaluate(
 ) -> dict[str, Any]:
     """:func:`run_experiment` in its locked run directory."""
     torch.manual_seed(settings.seed + ctx.rank)
-    if ctx.is_main:
+    imported = imported_metadata(settings.dataset_path)
+    scene, expect = settings.scene, settings.dataset_expect
+    if imported is not None:  # a robot's pushes: no simulator, no object state
+        scene, expect = settings.imported_scene(imported), {"image_size": scene.image_size}
+        log.info(
+            "%s was imported (python -m kinet_rl.import_data), not collected: no generalization "
+            "sets, no rearrangement evaluation (no simulator of its scene); workspace half size "
+            "%s m.",
+            settings.dataset_path,
+            scene.workspace_half_size,
+        )
+    elif ctx.is_main:
         collect_datasets(settings.env, settings.data)
     if ctx.world_size > 1:
         torch.distributed.barrier()
     data = {
-        split: load_dataset(settings.dataset_path, split, settings.dataset_expect)
+        split: load_dataset(settings.dataset_path, split, expect)
         for split in ("train", "val", "test")
     }
     model = build_model()
     for dataset in data.values():
         check_dataset_for(model, dataset)
     loss = build_loss(model)
-    scene = settings.scene
     geometry = SceneGeometry.of_scene(scene.task, scene.camera, scene.image_size)
     logger = make_logger(settings.logger, run_dir, settings.name, None, settings.wandb_kwargs)
     report = TrainingReport(
@@ -173,7 +184,7 @@ def _train_and_evaluate(
         settings.report.horizons,
         settings.report.num_sequences,
         logger,
-        held_out_sets(settings, model),
+        held_out_sets(settings, model) if imported is None else {},
     )
     trainer = Trainer(
         loss,
@@ -194,7 +205,7 @@ def _train_and_evaluate(
     model.planning = validated_planning(model, settings.rearrangement)
     cast(ConfigCheckpointMixin, model).save_checkpoint(run_dir / model.model_file, scene=scene)
     results = {**report.final(trainer.step), "world_size": ctx.world_size}
-    episodes = settings.report.rearrangement_episodes
+    episodes = settings.report.rearrangement_episodes if imported is None else 0
     if plans_every_method(model.capabilities, settings.rearrangement) and episodes > 0:
         rearrangement = replace(settings.rearrangement, episodes=episodes)
         summary = evaluate_rearrangement(

@@ -4,7 +4,7 @@ config (:func:`check_config`), which entry points run before any collection or t
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -130,8 +130,15 @@ class ExperimentSettings:
         length = self.env.get("max_steps")
         if length is None:
             return
+        self._check_windows(
+            length, f"env.max_steps={length} (the pushes per episode)", "env.max_steps"
+        )
+
+    def _check_windows(self, length: int, limit: str, name: str) -> None:
+        """Training windows and report horizons must fit in episodes of ``length`` pushes
+        (``limit``: that length in words; ``name``: its name)."""
         trainer, horizons = self.trainer, self.report.horizons
-        fits = f"at most env.max_steps={length} (the pushes per episode)"
+        fits = f"at most {limit}"
         require(trainer.horizon <= length, "trainer.horizon", trainer.horizon, fits)
         require(max(horizons) <= length, "report.horizons", list(horizons), f"values {fits}")
         windows = length - trainer.horizon + 1
@@ -139,7 +146,7 @@ class ExperimentSettings:
             trainer.steps_per_episode <= windows,
             "trainer.steps_per_episode",
             trainer.steps_per_episode,
-            f"at most env.max_steps - trainer.horizon + 1 = {windows}",
+            f"at most {name} - trainer.horizon + 1 = {windows}",
         )
 
     def _check_splits(self) -> None:
@@ -228,6 +235,27 @@ class ExperimentSettings:
         if count_range is None:
             return {**expect, "num_objects_range": None}
         return {**expect, "num_objects": count_range[1], "num_objects_range": list(count_range)}
+
+    def imported_scene(self, metadata: Mapping[str, Any]) -> SceneSettings:
+        """The scene of a run on an imported dataset (a robot's pushes, its ``metadata``): the
+        experiment's, with the dataset's workspace half size, which a checkpoint keeps for
+        planning in the robot's units.
+
+        Raises:
+            ConfigError: ``env.image_size`` is not the dataset's, or the training windows or the
+                report's horizons are longer than its episodes.
+        """
+        path, size = self.dataset_path, metadata["image_size"]
+        require(
+            self.env["image_size"] == size,
+            "env.image_size",
+            self.env["image_size"],
+            f"{size}, the image size of the imported dataset {path} (set env.image_size={size})",
+        )
+        length = metadata["episode_length"]
+        limit = f"{length}, the pushes per episode of the imported dataset {path}"
+        self._check_windows(length, limit, "the imported episodes' pushes")
+        return replace(self.scene, workspace_half_size=float(metadata["workspace_half_size"]))
 
     def identity(self) -> dict[str, Any]:
         """The settings a checkpoint must share with the run that resumes it."""

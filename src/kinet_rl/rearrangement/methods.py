@@ -131,13 +131,6 @@ METHODS: dict[str, Method] = {
 }
 
 
-def method_for_objective(objective: str) -> str:
-    """The method that plans with ``objective``: ``kinet_<objective>``, or ``model_mpc`` for a
-    model's own distance to the goal (a baseline's)."""
-    name = f"kinet_{objective}"
-    return name if name in METHODS else "model_mpc"
-
-
 def plans_every_method(capabilities: ModelCapabilities, settings: RearrangementSettings) -> bool:
     """Whether a model that declares ``capabilities`` can plan every method of ``settings``."""
     return all(METHODS[name].plans_with(capabilities) for name in settings.methods)
