@@ -86,7 +86,7 @@ def goal_similarity(observation: dict[str, np.ndarray], episode: Episode) -> flo
 
 def make_episode(scene: SceneSettings, task: TaskSettings, seed: int) -> Episode:
     """Builds the episode of ``seed``: random start, reachable goal (see the module docstring)."""
-    env = make_dm_env(**vars(scene), seed=seed)
+    env = make_dm_env(**scene.as_dict(), seed=seed)
     half_size = workspace_for(scene.task).half_size
     goal_policy = RandomPushPolicy(half_size, object_push_prob=1.0)
     rng = np.random.default_rng([seed, 1])
