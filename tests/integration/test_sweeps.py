@@ -19,12 +19,13 @@ import pytest
 pytestmark = pytest.mark.slow
 
 REPO = Path(__file__).resolve().parents[2]
-SCALE = ("--config-dir", str(REPO / "ci" / "user_conf"), "tables=sweep_smoke")
+CONF = ("--config-dir", str(REPO / "ci" / "user_conf"))
 
 
-def tables(cwd: Path, *args: str) -> subprocess.CompletedProcess:
+def tables(cwd: Path, *overrides: str, multirun: bool = False) -> subprocess.CompletedProcess:
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "OMP_NUM_THREADS": "1"}
-    command = [sys.executable, "-m", "kinet_rl.tables", *SCALE, *args]
+    flags = [*CONF, *(["-m"] if multirun else [])]
+    command = [sys.executable, "-m", "kinet_rl.tables", *flags, "tables=sweep_smoke", *overrides]
     return subprocess.run(command, cwd=cwd, env=env, capture_output=True, text=True, timeout=900)
 
 
@@ -36,10 +37,10 @@ def test_a_sweep_of_two_experiments_and_two_seeds_then_the_tables(launcher, tmp_
     assert not list(out.glob("blocks_topview*")), "aggregate ran a row"
     missing = json.loads((out / "tables.json").read_text())["missing"]
     assert len(missing) == 5  # 4 rows and the references, none run
-    jobs = ["-m", "row=in,forw", "seed=0,1", f"hydra/launcher={launcher}"]
-    sweep = tables(tmp_path, *jobs)
+    jobs = ["row=in,forw", "seed=0,1", f"hydra/launcher={launcher}"]
+    sweep = tables(tmp_path, *jobs, multirun=True)
     assert sweep.returncode == 0, sweep.stderr[-3000:]
-    references = tables(tmp_path, "-m", "row=references", f"hydra/launcher={launcher}")
+    references = tables(tmp_path, "row=references", f"hydra/launcher={launcher}", multirun=True)
     assert references.returncode == 0, references.stderr[-3000:]
     after = tables(tmp_path, "aggregate=true")
     assert after.returncode == 0, after.stderr[-3000:]
@@ -54,5 +55,5 @@ def test_a_sweep_of_two_experiments_and_two_seeds_then_the_tables(launcher, tmp_
     assert "| IN (GT state) |" in text and "| Forw |" in text and "Not yet run" not in text
     # The four jobs shared one dataset, collected once.
     assert len(list((tmp_path / "data").iterdir())) == 1
-    rerun = tables(tmp_path, *jobs)  # finished jobs resume: nothing is trained again
+    rerun = tables(tmp_path, *jobs, multirun=True)  # finished jobs resume: nothing trains again
     assert rerun.returncode == 0 and "Training blocks_topview" not in rerun.stderr
