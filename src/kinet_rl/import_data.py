@@ -6,7 +6,9 @@ robot's pushes") into a kinet_rl dataset of pixels and pushes without object sta
 KINet (or V-CDN, Forw, ForwInv) on. Checks the whole folder first and stops with a named error
 for bad input (nothing written); prints what it will do (crop, resize, episode windows,
 splits), then writes with a progress bar. Rerun the same command to resume an interrupted
-import. Exit status: 0 done, 2 bad input or arguments.
+import. A LeRobot v3.0 dataset (a folder with ``meta/info.json``; images, not video) is
+imported through the same path (:mod:`kinet_rl.data.lerobot`; ``--camera-key``,
+``--action-key``, ``--workspace-half-size``). Exit status: 0 done, 2 bad input or arguments.
 """
 
 from __future__ import annotations
@@ -25,7 +27,8 @@ from kinet_rl.data.importing import (
     import_push_folder,
     plan_import,
 )
-from kinet_rl.data.push_folder import PushFolderError
+from kinet_rl.data.lerobot import is_lerobot_folder
+from kinet_rl.data.push_folder import PushFolder, PushFolderError
 from kinet_rl.data.storage import DatasetError
 
 logger = logging.getLogger(__name__)
@@ -61,7 +64,9 @@ def parse_splits(text: str) -> dict[str, float]:
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     """Command-line arguments."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("source", type=Path, help="the push folder (meta.json, episode_*/)")
+    parser.add_argument(
+        "source", type=Path, help="the push folder (meta.json, episode_*/) or a LeRobot v3.0 one"
+    )
     parser.add_argument("--root", type=Path, default=Path("data"), help="datasets folder")
     parser.add_argument("--name", default=None, help="dataset name (default: the folder's name)")
     parser.add_argument(
@@ -89,6 +94,17 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     )
     parser.add_argument("--chunk-episodes", type=int, default=16, help="episodes per commit")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    lerobot = parser.add_argument_group("LeRobot v3.0 datasets (a folder with meta/info.json)")
+    lerobot.add_argument(
+        "--camera-key", default=None, help="image feature (observation.images.top)"
+    )
+    lerobot.add_argument("--action-key", default=None, help="4-d push feature, metres")
+    lerobot.add_argument(
+        "--workspace-half-size",
+        type=float,
+        default=None,
+        help="metres; needed when info.json has no kinet_rl.workspace_half_size",
+    )
     return parser.parse_args(argv)
 
 
@@ -104,7 +120,7 @@ def main(argv: Sequence[str] | None = None) -> Path:
             chunk_episodes=args.chunk_episodes,
             **({} if args.splits is None else {"splits": args.splits}),
         )
-        plan = plan_import(args.source, settings)
+        plan = plan_import(source_folder(args), settings)
     except (PushFolderError, ConfigError) as err:
         sys.stderr.write(f"error: {type(err).__name__}: {err}\n")
         raise SystemExit(2) from None
@@ -117,6 +133,20 @@ def main(argv: Sequence[str] | None = None) -> Path:
         raise SystemExit(2) from None
     print(f"Done: {path}. Train on it with: {train_command(args.root, name, plan)}", flush=True)
     return path
+
+
+def source_folder(args: argparse.Namespace) -> Path | PushFolder:
+    """The push folder's path, or a LeRobot dataset's episodes as a checked push folder."""
+    if not is_lerobot_folder(args.source):
+        return args.source
+    from kinet_rl.data.lerobot import DEFAULT_ACTION, DEFAULT_CAMERA, read_lerobot
+
+    return read_lerobot(
+        args.source,
+        camera_key=args.camera_key or DEFAULT_CAMERA,
+        action_key=args.action_key or DEFAULT_ACTION,
+        workspace_half_size=args.workspace_half_size,
+    ).as_push_folder()
 
 
 def train_command(root: Path, name: str, plan: ImportPlan) -> str:

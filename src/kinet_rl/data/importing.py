@@ -228,8 +228,13 @@ class ImportPlan:
         )
 
 
-def plan_import(source: str | Path, settings: ImportSettings | None = None) -> ImportPlan:
+def plan_import(
+    source: str | Path | PushFolder, settings: ImportSettings | None = None
+) -> ImportPlan:
     """Checks a push folder and the import settings; writes nothing.
+
+    ``source`` is a push folder's path or an already checked :class:`PushFolder` (e.g. a
+    LeRobot dataset's, :meth:`kinet_rl.data.lerobot.LeRobotSource.as_push_folder`).
 
     Raises:
         PushFolderError: The folder is not in the format or holds bad data (a named subclass:
@@ -240,7 +245,7 @@ def plan_import(source: str | Path, settings: ImportSettings | None = None) -> I
             length no episode reaches).
     """
     settings = settings or ImportSettings()
-    folder = read_push_folder(source)
+    folder = source if isinstance(source, PushFolder) else read_push_folder(source)
     box = crop_box(*folder.image_size, settings.crop)
     pushes = [len(episode.pushes) for episode in folder.episodes]
     length = settings.episode_length or min(pushes)
