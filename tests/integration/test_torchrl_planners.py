@@ -1,12 +1,14 @@
 """torchrl's own CEMPlanner and MPPIPlanner plan pushes over the WorldModelEnv of trained models.
 
-A learned model that plans from camera images (the shipped KINet, ``blocks_topview``: goal
-images) and a baseline trained here (IN, 3,000 steps on 40 simulated episodes: goal object
-positions) each drive rearrangement episodes of the simulator through
+A KINet trained here at smoke scale (400 steps, planning with the paper's S), the shipped KINet
+(``blocks_topview``, its stored objective; both from goal images) and a baseline trained here
+(IN, 3,000 steps on 40 simulated episodes; goal object positions) each drive 4 rearrangement
+episodes of the simulator (validation seeds, T = 10) through
 ``kinet_rl.planners.PushWorldModelEnv`` (a ``torchrl.envs.model_based.WorldModelEnv``) with
 ``torchrl.modules.CEMPlanner`` and ``MPPIPlanner``, and end closer to the goal than random
-pushes on the same episodes (validation seeds, fixed). Measured numbers are in the test ids'
-comments below.
+pushes on the same episodes. Measured (2-core AMD EPYC), mean final distance against random
+pushes' 76.5 mm: smoke KINet 66.2 (CEM and MPPI), shipped KINet 27.4 (CEM) and 25.3 (MPPI),
+IN 48.8 (CEM) and 34.4 (MPPI).
 """
 
 from __future__ import annotations
@@ -60,9 +62,9 @@ class TorchRLPolicy(TensorDictModuleBase):
     """A model's world model, its WorldModelEnv and a torchrl planner as a rearrangement policy:
     the observation and goal entries the model declares in, pushes out."""
 
-    def __init__(self, model, kind: str) -> None:
+    def __init__(self, model, kind: str, objective: str | None = None) -> None:
         super().__init__()
-        self.world_model = model.world_model()
+        self.world_model = model.world_model(objective)
         self.planner = torchrl_planner(kind, PushWorldModelEnv(self.world_model))
         self.in_keys = [*model.capabilities.observes, *model.capabilities.goal]
         self.out_keys = ["action"]
@@ -111,6 +113,41 @@ def trained_in(tmp_path_factory) -> ObjectInteractionModel:
     result = subprocess.run(command, cwd=REPO, env=env, capture_output=True, text=True, timeout=900)
     assert result.returncode == 0, result.stderr[-4000:]
     return ObjectInteractionModel.from_checkpoint(tmp / "run" / "model.pt").eval()
+
+
+@pytest.fixture(scope="module")
+def smoke_kinet(tmp_path_factory) -> KINetWorldModel:
+    """KINet trained here at smoke scale: 400 steps on 40 episodes of 3 blocks at 32 px."""
+    tmp = tmp_path_factory.mktemp("kinet")
+    command = [
+        sys.executable, "-m", "kinet_rl.train", "+exp=smoke", f"data.root={tmp}",
+        f"hydra.run.dir={tmp / 'run'}", "data.generalization=null", "data.num_episodes=40",
+        "data.num_workers=2", "env.max_steps=20", "trainer.steps=400", "trainer.batch_size=32",
+        "trainer.eval_every=400", "trainer.checkpoint_every=400", "trainer.log_every=100",
+        "report.horizons=[1]", "report.num_sequences=64", "estimate=false",
+    ]  # fmt: skip
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    result = subprocess.run(
+        command, cwd=REPO, env=env, capture_output=True, text=True, timeout=1500
+    )
+    assert result.returncode == 0, result.stderr[-4000:]
+    return KINetWorldModel.from_checkpoint(tmp / "run" / "kinet.pt").eval()
+
+
+@pytest.mark.parametrize("kind", ["cem", "mppi"])
+def test_torchrl_planners_over_a_smoke_kinet_beat_random_pushes_from_goal_images(kind, smoke_kinet):
+    torch.manual_seed(0)  # torchrl's planners sample from the global RNG
+    scene = smoke_kinet.scene
+    # After 400 steps at 32 px only the paper's S (cosine) plans reliably
+    # (test_rearrangement_trained.py); the keypoint objectives need the cpu-scale model.
+    planned = final_distances_mm(TorchRLPolicy(smoke_kinet, kind, "graph"), scene)
+    random = random_pushes_mm(scene)
+    print(
+        f"smoke KINet + torchrl {kind}: {planned.round(1)} mm; random pushes {random.round(1)} mm"
+    )
+    # Measured on a 2-core AMD EPYC: 66.2 mm (CEM and MPPI alike) against 76.5 for random
+    # pushes; a smoke model's training differs across machines, so only "closer" is asserted.
+    assert planned.mean() < random.mean(), (planned, random)
 
 
 @pytest.mark.parametrize("kind", ["cem", "mppi"])
