@@ -97,41 +97,39 @@ def random_pushes_mm(scene: SceneSettings) -> np.ndarray:
     return final_distances_mm(RandomPolicy(seeds), scene)
 
 
-@pytest.fixture(scope="module")
-def trained_in(tmp_path_factory) -> ObjectInteractionModel:
-    """IN trained here on 40 simulated episodes of 3 blocks (GT state; 3,000 steps)."""
-    tmp = tmp_path_factory.mktemp("in")
+def train(tmp: Path, experiment: str, steps: int, *overrides: str) -> Path:
+    """Trains ``+exp=<experiment>`` for ``steps`` on 40 episodes of 20 pushes in ``tmp``; returns
+    the run directory."""
     command = [
-        sys.executable, "-m", "kinet_rl.train", "+exp=blocks_topview_in", f"data.root={tmp}",
+        sys.executable, "-m", "kinet_rl.train", f"+exp={experiment}", f"data.root={tmp}",
         f"hydra.run.dir={tmp / 'run'}", "data.generalization=null", "data.num_episodes=40",
-        "data.num_workers=2", "env.image_size=32", "env.max_steps=20", "trainer.steps=3000",
-        "trainer.batch_size=32", "trainer.eval_every=3000", "trainer.checkpoint_every=3000",
-        "trainer.log_every=100", "report.horizons=[1]", "report.num_sequences=32",
-        "report.rearrangement_episodes=0", "estimate=false",
-    ]  # fmt: skip
-    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    result = subprocess.run(command, cwd=REPO, env=env, capture_output=True, text=True, timeout=900)
-    assert result.returncode == 0, result.stderr[-4000:]
-    return ObjectInteractionModel.from_checkpoint(tmp / "run" / "model.pt").eval()
-
-
-@pytest.fixture(scope="module")
-def smoke_kinet(tmp_path_factory) -> KINetWorldModel:
-    """KINet trained here at smoke scale: 400 steps on 40 episodes of 3 blocks at 32 px."""
-    tmp = tmp_path_factory.mktemp("kinet")
-    command = [
-        sys.executable, "-m", "kinet_rl.train", "+exp=smoke", f"data.root={tmp}",
-        f"hydra.run.dir={tmp / 'run'}", "data.generalization=null", "data.num_episodes=40",
-        "data.num_workers=2", "env.max_steps=20", "trainer.steps=400", "trainer.batch_size=32",
-        "trainer.eval_every=400", "trainer.checkpoint_every=400", "trainer.log_every=100",
-        "report.horizons=[1]", "report.num_sequences=64", "estimate=false",
+        "data.num_workers=2", "env.max_steps=20", f"trainer.steps={steps}",
+        "trainer.batch_size=32", f"trainer.eval_every={steps}", f"trainer.checkpoint_every={steps}",
+        "trainer.log_every=100", "report.horizons=[1]", "estimate=false", *overrides,
     ]  # fmt: skip
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
     result = subprocess.run(
         command, cwd=REPO, env=env, capture_output=True, text=True, timeout=1500
     )
     assert result.returncode == 0, result.stderr[-4000:]
-    return KINetWorldModel.from_checkpoint(tmp / "run" / "kinet.pt").eval()
+    return tmp / "run"
+
+
+@pytest.fixture(scope="module")
+def trained_in(tmp_path_factory) -> ObjectInteractionModel:
+    """IN trained here on 40 simulated episodes of 3 blocks (GT state; 3,000 steps)."""
+    run = train(
+        tmp_path_factory.mktemp("in"), "blocks_topview_in", 3000, "env.image_size=32",
+        "report.num_sequences=32", "report.rearrangement_episodes=0",
+    )  # fmt: skip
+    return ObjectInteractionModel.from_checkpoint(run / "model.pt").eval()
+
+
+@pytest.fixture(scope="module")
+def smoke_kinet(tmp_path_factory) -> KINetWorldModel:
+    """KINet trained here at smoke scale: 400 steps on 40 episodes of 3 blocks at 32 px."""
+    run = train(tmp_path_factory.mktemp("kinet"), "smoke", 400, "report.num_sequences=64")
+    return KINetWorldModel.from_checkpoint(run / "kinet.pt").eval()
 
 
 @pytest.mark.parametrize("kind", ["cem", "mppi"])

@@ -270,15 +270,16 @@ class PushWorldModelEnv(WorldModelEnv):
         )
         self.action_spec = Bounded(-1.0, 1.0, (ACTION_DIM,), device=device)
         self.reward_spec = Unbounded((1,), device=device)
+        self._step_keys: list[NestedKey] | None = None
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
-        out = self.world_model(tensordict.copy()).get("next")
-        keys = [
-            *self.observation_spec.keys(True, True),
-            *self.full_reward_spec.keys(True, True),
-            *self.full_done_spec.keys(True, True),
-        ]
-        return out.select(*keys)
+        if self._step_keys is None:  # what a step returns, read from the specs once
+            self._step_keys = [
+                *self.observation_spec.keys(True, True),
+                *self.full_reward_spec.keys(True, True),
+                *self.full_done_spec.keys(True, True),
+            ]
+        return self.world_model(tensordict.copy()).get("next").select(*self._step_keys)
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         keys = list(self.observation_spec.keys(True, True))
