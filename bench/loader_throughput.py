@@ -11,6 +11,11 @@ frames, actions and poses with ``index_select`` from plain tensors held in memor
 TensorDict (naive advanced indexing of the in-memory tensors is printed for reference).
 Both run alternately for several rounds in one process; medians are reported. The last line is
 ``ratio: X`` = ``sample(32)`` batches/s over baseline batches/s (1.0 = no loader overhead).
+
+``--lerobot`` also exports the dataset to LeRobot v3 without its object state, imports it
+(``python -m kinet_rl.import_data``'s path) and times ``sample(32)`` on the import beside the
+native one: ``import ratio: X`` = imported batches/s over native (the own-data issue's target:
+>= 0.95).
 """
 
 from __future__ import annotations
@@ -25,7 +30,15 @@ from pathlib import Path
 import torch
 from tensordict import TensorDict
 
-from kinet_rl.data import load_dataset, split_ranges
+from kinet_rl.data import (
+    ImportSettings,
+    import_push_folder,
+    load_dataset,
+    plan_import,
+    split_ranges,
+)
+from kinet_rl.data.lerobot import read_lerobot
+from kinet_rl.data.lerobot_writer import export_lerobot
 from kinet_rl.data.storage import FORMAT_VERSION, EpisodeWriter, episode_array_specs
 
 NUM_OBJECTS = 3
@@ -41,6 +54,7 @@ def write_synthetic_dataset(path: Path, episodes: int, steps: int, image_size: i
         "episode_length": steps,
         "image_size": image_size,
         "num_objects": NUM_OBJECTS,
+        "workspace_half_size": 0.20,
     }
     writer = EpisodeWriter(path, episodes, steps, image_size, NUM_OBJECTS, settings)
     generator = torch.Generator().manual_seed(0)
@@ -112,6 +126,18 @@ def in_memory_baselines(path: Path, steps: int) -> dict[str, Callable[[torch.Gen
     }
 
 
+def import_through_lerobot(path: Path, image_size: int) -> Path:
+    """``path`` exported to LeRobot v3 without object state and imported beside it."""
+    lerobot = export_lerobot(path, path.parent / "lerobot", include_object_state=False)
+    settings = ImportSettings(image_size=image_size)
+    return import_push_folder(
+        plan_import(read_lerobot(lerobot).as_push_folder(), settings),
+        path.parent,
+        "imported",
+        progress=False,
+    )
+
+
 def batches_per_second(sample: Callable[[torch.Generator], object], seconds: float) -> float:
     """Calls ``sample`` for about ``seconds`` and returns calls per second."""
     generator = torch.Generator().manual_seed(1)
@@ -130,6 +156,7 @@ def main() -> None:
     parser.add_argument("--image-size", type=int, default=64)
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--seconds", type=float, default=1.0, help="per measurement")
+    parser.add_argument("--lerobot", action="store_true", help="also time a LeRobot import")
     args = parser.parse_args()
     torch.set_num_threads(1)
     with tempfile.TemporaryDirectory() as root:
@@ -144,6 +171,9 @@ def main() -> None:
             "sample(32)": lambda g: data.sample(BATCH, generator=g),
             "sample_sequences(8, 10)": lambda g: data.sample_sequences(8, 10, generator=g),
         }
+        if args.lerobot:
+            imported = load_dataset(import_through_lerobot(path, args.image_size), "train")
+            samplers["imported: sample(32)"] = lambda g: imported.sample(BATCH, generator=g)
         for sample in samplers.values():  # warm up: pages into the cache
             batches_per_second(sample, 0.3)
         rates: dict[str, list[float]] = {name: [] for name in samplers}
@@ -154,6 +184,8 @@ def main() -> None:
         for name, rate in medians.items():
             print(f"{name}: {rate:.0f} batches/s")
         baseline = medians["baseline: in-memory index_select"]
+        if args.lerobot:
+            print(f"import ratio: {medians['imported: sample(32)'] / medians['sample(32)']:.2f}")
         print(f"ratio: {medians['sample(32)'] / baseline:.2f}")
 
 

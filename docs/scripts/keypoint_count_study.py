@@ -7,9 +7,13 @@ and its rearrangement JSON (final distance to the goal of ``--method``). Prints 
 Student's t) and saves a plot of the final distance against K: each run with its 95%-interval
 bars over episodes, the mean over seeds and the mean start distance.
 
-Usage: python docs/scripts/keypoint_count_study.py out.png \
-    --run 3 0 runs/k3/results.json runs/k3/rearrangement/rearrangement.json \
-    --run 9 0 runs/k9/results.json runs/k9/rearrangement/rearrangement.json
+Usage, after the rows of ``python -m kinet_rl.tables -m tables=ycb_side96_cpu row=kinet,k3,k6,k12``
+(each row's run ``runs/tables_ycb_side96_cpu/<run>[_seed<s>]``, its MPC under ``tables_mpc_64x3/``)::
+
+    R=runs/tables_ycb_side96_cpu
+    python docs/scripts/keypoint_count_study.py out.png \
+        --run 3 0 $R/ycb_sideview_k3/results.json $R/ycb_sideview_k3/tables_mpc_64x3/rearrangement.json \
+        --run 9 0 $R/ycb_sideview/results.json $R/ycb_sideview/tables_mpc_64x3/rearrangement.json
 """
 
 from __future__ import annotations

@@ -1,7 +1,11 @@
-"""The cpu-scale MPC measurements of docs/results.md: choose on validation, report on test.
+"""The cpu-scale MPC study of docs/results.md: choose costs and planner settings on validation
+episodes, and plan the tables' models with KINet's other costs on test episodes.
 
-Run from the repository root, after ``python -m kinet_rl.tables tables=cpu`` trained the seed-0
-rows into ``--runs`` (default ``runs/tables_cpu``)::
+The published MPC tables are configs of ``python -m kinet_rl.tables`` (Fig. 4a:
+``tables=fig4a_mpc_cpu``); this tool plans their seed-0 models with what the tables do not vary
+(several costs of one model, planner variants). Run from the repository root, after the tables
+trained the seed-0 rows into ``--runs`` (default ``runs/tables_cpu``; the Fig. 4a config's:
+``--runs runs/tables_fig4a_mpc_cpu``)::
 
     python docs/scripts/mpc_cpu.py validation --out runs/mpc_cpu/validation --episodes 50
     python docs/scripts/mpc_cpu.py test --out runs/mpc_cpu/test_64x3 --episodes 100 \

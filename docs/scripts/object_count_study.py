@@ -6,9 +6,13 @@ episodes.
 Prints a markdown table (start distance, then each run's final distance ± interval and success
 rate per object count) and saves the plot.
 
-Usage: python docs/scripts/object_count_study.py out.png \
-    "trained on 3, seed 0=runs/a/rearrangement/rearrangement.json" \
-    "trained on 1-5, seed 0=runs/b/rearrangement/rearrangement.json"
+Usage, after the rows of ``python -m kinet_rl.tables -m tables=ycb_side96_cpu row=kinet,objects_1to5``
+(their object counts are in each row's ``tables_mpc_64x3/rearrangement.json``)::
+
+    R=runs/tables_ycb_side96_cpu
+    python docs/scripts/object_count_study.py out.png \
+        "trained on 3, seed 0=$R/ycb_sideview/tables_mpc_64x3/rearrangement.json" \
+        "trained on 1-5, seed 0=$R/ycb_sideview_objects_1to5/tables_mpc_64x3/rearrangement.json"
 """
 
 from __future__ import annotations

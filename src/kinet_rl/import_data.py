@@ -6,8 +6,8 @@ robot's pushes") into a kinet_rl dataset of pixels and pushes without object sta
 KINet (or V-CDN, Forw, ForwInv) on. Checks the whole folder first and stops with a named error
 for bad input (nothing written); prints what it will do (crop, resize, episode windows,
 splits), then writes with a progress bar. Rerun the same command to resume an interrupted
-import. A LeRobot v3.0 dataset (a folder with ``meta/info.json``; images, not video) is
-imported through the same path (:mod:`kinet_rl.data.lerobot`; ``--camera-key``,
+import. A LeRobot v3.0 dataset (a folder with ``meta/info.json``; the camera as images or as
+video) is imported through the same path (:mod:`kinet_rl.data.lerobot`; ``--camera-key``,
 ``--action-key``, ``--workspace-half-size``). Exit status: 0 done, 2 bad input or arguments.
 """
 
@@ -28,7 +28,7 @@ from kinet_rl.data.importing import (
     plan_import,
 )
 from kinet_rl.data.lerobot import is_lerobot_folder
-from kinet_rl.data.push_folder import PushFolder, PushFolderError
+from kinet_rl.data.push_folder import UNITS, PushFolder, PushFolderError
 from kinet_rl.data.storage import DatasetError
 
 logger = logging.getLogger(__name__)
@@ -98,7 +98,14 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     lerobot.add_argument(
         "--camera-key", default=None, help="image feature (observation.images.top)"
     )
-    lerobot.add_argument("--action-key", default=None, help="4-d push feature, metres")
+    lerobot.add_argument("--action-key", default=None, help="4-d push feature (action)")
+    lerobot.add_argument(
+        "--action-units",
+        choices=UNITS,
+        default=None,
+        help="the action's units: metres (table frame) or normalised (metres / workspace half "
+        "size); default: info.json's kinet_rl.action_units, else metres",
+    )
     lerobot.add_argument(
         "--workspace-half-size",
         type=float,
@@ -121,7 +128,7 @@ def main(argv: Sequence[str] | None = None) -> Path:
             **({} if args.splits is None else {"splits": args.splits}),
         )
         plan = plan_import(source_folder(args), settings)
-    except (PushFolderError, ConfigError) as err:
+    except (PushFolderError, ConfigError, ImportError) as err:  # ImportError: an extra missing
         sys.stderr.write(f"error: {type(err).__name__}: {err}\n")
         raise SystemExit(2) from None
     path = args.root / name
@@ -146,6 +153,7 @@ def source_folder(args: argparse.Namespace) -> Path | PushFolder:
         camera_key=args.camera_key or DEFAULT_CAMERA,
         action_key=args.action_key or DEFAULT_ACTION,
         workspace_half_size=args.workspace_half_size,
+        action_units=args.action_units,
     ).as_push_folder()
 
 

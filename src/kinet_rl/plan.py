@@ -5,8 +5,9 @@
 With no other argument it plans as the model's results were produced: the planning objective
 and planner budget stored in the checkpoint (chosen on validation episodes), and the workspace
 and image size of the scene it was trained on (for a model trained on a robot's imported pushes,
-the workspace its push folder stated, so pushes come out in the robot's metres). Images of another size are refused (``--resize``
-resizes them to the model's size and says so). Prints one JSON object per ``--image``: the push
+the workspace its push folder stated, so pushes come out in the robot's metres, and its camera's
+frames are cropped and resized as the import did). Images of another size are refused
+(``--resize`` resizes them to the model's size and says so). Prints one JSON object per ``--image``: the push
 start and end in metres (table frame, origin at the workspace centre, +x right and +y up in the
 top camera image) and normalised to ``[-1, 1]``. The planner's warm start lives only within one
 process: for closed-loop control call :class:`kinet_rl.models.PushPlanner` from Python (see

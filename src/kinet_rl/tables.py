@@ -1,32 +1,35 @@
 """Train and evaluate every row of the comparison tables: ``python -m kinet_rl.tables [tables=paper]``.
 
-For each model (KINet, its ablations and the baselines) and camera, the row's config is the root
-config composed with the experiment ``+exp=<task>_<camera>view<suffix>`` (task ``blocks`` or
-``ycb``) and the scale's overrides (``conf/tables/<scale>.yaml``); the row is trained with
+For each row (a model of :data:`~kinet_rl.rows.ROWS`, or a variant of one: ``tables.variants``)
+and camera, the row's config is the root config composed with the experiment
+``+exp=<task>_<camera>view<suffix>`` (task ``blocks`` or ``ycb``) and the overrides of
+``conf/tables/<scale>.yaml`` (:func:`row_config`); the row is trained with
 :func:`kinet_rl.pipeline.run_experiment` in ``<out>/<exp_name>`` and then evaluated the same way
 as every other row:
 
-* Table I: single-step forward error on held-out test sequences (same sequences per camera).
-* MPC tables (``mpc_camera`` only), one per planner budget of ``mpc_budgets`` (every row of a
-  table plans with the same budget): :func:`~kinet_rl.pipeline.evaluate_rearrangement` with the
-  eval group's ``kinet_method`` (KINet variants) or ``model_mpc`` (baselines), on the same
-  episodes, plus random pushes and the oracle.
-* Table II: the generalization cells (1-5 objects x train/gen geometry) of
-  ``generalization_models``, at the first budget.
+* Table I: single-step forward error on held-out test sequences (same sequences per camera), and
+  the keypoint accuracy of its training report.
+* MPC tables (``mpc_camera`` only), one per entry of ``mpc_budgets`` (every row of a table plans
+  with the same budget, on the same episodes; an entry may name its rows and episodes):
+  :func:`~kinet_rl.pipeline.evaluate_rearrangement` with the eval group's ``kinet_method``
+  (KINet variants) or ``model_mpc`` (baselines), for the training seeds of ``mpc_seeds``, plus
+  random pushes and the oracle.
+* Table II and the backgrounds: the generalization cells (1-5 objects x train/gen geometry,
+  extra backgrounds) of ``generalization_models``, at the first budget.
 
 Every stage writes its JSON next to the row's run; re-running skips finished stages (a row's
 training is finished when its ``results.json`` exists; an MPC result is redone when its
 evaluation settings changed). Writes ``<out>/tables.md`` and ``<out>/mpc_curves_<budget>.png``.
+The settings and the markdown are :mod:`kinet_rl.comparison`'s.
 """
 
 from __future__ import annotations
 
 import json
 import logging
-import re
 import time
-from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
 
@@ -38,16 +41,19 @@ from omegaconf import DictConfig, OmegaConf
 
 from kinet_rl.atomic import atomic_write_json, atomic_write_text, directory_lock
 from kinet_rl.comparison import (
+    CAMERAS,
+    TASKS,
+    TablesSettings,
+    accuracy_section,
+    generalization_sections,
     horizon_table,
     mpc_table,
     plot_learning_curves,
     plot_mpc_curves,
     table_i,
-    table_ii,
 )
 from kinet_rl.config_schema import (
     ConfigError,
-    check_arguments,
     check_keys,
     config_group,
     require,
@@ -66,93 +72,17 @@ from kinet_rl.pipeline import (
     evaluate_rearrangement,
     run_experiment,
 )
-from kinet_rl.planners.graph_mpc import CODE_ARGUMENTS, GraphMPCPlanner, check_planner_settings
+from kinet_rl.planners.graph_mpc import check_planner_settings
 from kinet_rl.rearrangement import RearrangementSettings
 from kinet_rl.rearrangement.report import budget_text
 from kinet_rl.rows import ROWS
 
 logger = logging.getLogger(__name__)
 
-CAMERAS = ("top", "side")
 #: The sweep job (``row=references``) of random pushes and the oracle on the MPC episodes.
 REFERENCES = "references"
 #: Keys of the root config besides the ``tables`` group (``conf/tables.yaml``).
 ROOT_KEYS = ("tables", "row", "seed", "aggregate", "threads", "out_dir")
-#: The tables' scenes: ``task`` of the rows' experiments, and how the tables name it.
-TASKS = {"blocks": "BlockObjs", "ycb": "YCBObjs"}
-#: What a planner budget's name may be (it is part of file names, e.g. ``tables_mpc_64x3.json``).
-BUDGET_NAME = re.compile(r"[\w.-]+")
-
-
-@dataclass(frozen=True)
-class TablesSettings:
-    """The ``tables`` config group (``conf/tables/<scale>.yaml``; each file documents its keys).
-
-    ``mpc_budgets`` maps a budget's name to planner settings that override each row's eval
-    planner; their keys and types are checked here, their ranges by :func:`check_rows`.
-
-    Raises:
-        ConfigError: A model, camera, seed or budget that no row can have, named.
-    """
-
-    scale: str
-    models: tuple[str, ...]
-    cameras: tuple[str, ...]
-    mpc_camera: str
-    generalization_models: tuple[str, ...]
-    seeds: tuple[int, ...]
-    forward_horizons: tuple[int, ...]
-    forward_sequences: int
-    mpc_budgets: Mapping[str, Mapping[str, Any]]
-    overrides: tuple[str, ...] = ()
-    task: str = "blocks"
-    model_overrides: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
-    eval: Mapping[str, Any] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        for name, choices, least in (
-            ("models", tuple(ROWS), 1),
-            ("cameras", CAMERAS, 1),
-            ("generalization_models", self.models, 0),
-            ("model_overrides", tuple(ROWS), 0),
-        ):
-            values = list(getattr(self, name))
-            require(
-                len(values) >= least and set(values) <= set(choices),
-                name,
-                values,
-                f"{'a non-empty list' if least else 'a list'} of names from {list(choices)}",
-            )
-        require(self.mpc_camera in self.cameras, "mpc_camera", self.mpc_camera, "one of cameras")
-        require(self.task in TASKS, "task", self.task, f"one of {list(TASKS)}")
-        for name, low in (("seeds", 0), ("forward_horizons", 1)):
-            values = list(getattr(self, name))
-            require(
-                bool(values) and min(values) >= low,
-                name,
-                values,
-                f"a non-empty list of integers of at least {low}",
-            )
-        require(
-            self.forward_sequences >= 1,
-            "forward_sequences",
-            self.forward_sequences,
-            "an integer of at least 1",
-        )
-        require(
-            bool(self.mpc_budgets) and all(BUDGET_NAME.fullmatch(n) for n in self.mpc_budgets),
-            "mpc_budgets",
-            dict(self.mpc_budgets),
-            "a non-empty mapping from names (letters, digits, '_', '-', '.'; they name files) to "
-            "planner settings, e.g. {64x3: {num_candidates: 64, optim_steps: 3, top_k: 8}}",
-        )
-        for name, budget in self.mpc_budgets.items():  # keys and types; ranges: check_rows
-            check_arguments(GraphMPCPlanner, budget, f"mpc_budgets.{name}", exclude=CODE_ARGUMENTS)
-
-    @classmethod
-    def from_container(cls, values: Mapping[str, Any]) -> TablesSettings:
-        """Settings from the resolved ``tables`` group."""
-        return settings_from(cls, values, "tables")
 
 
 @dataclass(frozen=True)
@@ -194,43 +124,80 @@ def experiment_name(model: str, camera: str, task: str = "blocks") -> str:
     return f"{task}_{camera}view{ROWS[model].experiment_suffix}"
 
 
-def row_config(tables: TablesSettings, model: str, camera: str, seed: int = 0) -> DictConfig:
-    """The composed training config of a row and training seed (needs an initialised Hydra)."""
-    exp = experiment_name(model, camera, tables.task)
+def row_name(tables: TablesSettings, model: str, camera: str) -> str:
+    """A row's run name (its ``exp_name``): its experiment's, ``_<name>`` added for a variant."""
+    experiment = experiment_name(tables.base_model(model), camera, tables.task)
+    return f"{experiment}_{model}" if model in tables.variants else experiment
+
+
+def row_config(
+    tables: TablesSettings, model: str, camera: str, seed: int = 0, training: bool = True
+) -> DictConfig:
+    """The composed training config of a row and training seed (needs an initialised Hydra).
+
+    Its overrides, in order: ``overrides`` (``{camera}`` filled in), ``camera_overrides``, the
+    model's ``model_overrides``, a variant's ``overrides`` and ``train_overrides`` and its
+    ``exp_name``, then the seed. ``training=False`` leaves out ``train_overrides``: the config
+    of the row's MPC episodes.
+    """
+    base = tables.base_model(model)
+    exp, name = experiment_name(base, camera, tables.task), row_name(tables, model, camera)
     extra = [o.replace("{camera}", camera) for o in tables.overrides]
-    extra += list(tables.model_overrides.get(model, []))
+    extra += list(tables.camera_overrides.get(camera, []))
+    extra += list(tables.model_overrides.get(base, []))
+    variant = tables.variants.get(model)
+    if variant is not None:
+        extra += [*variant.overrides, *(variant.train_overrides if training else ())]
+        extra.append(f"exp_name={name}")
     extra += [f"seed={seed}", f"trainer.seed={seed}"]
     cfg = compose(config_name="config", overrides=[f"+exp={exp}", *extra])
-    if cfg.exp_name != exp:
-        raise ValueError(
-            f"Experiment {exp} sets exp_name={cfg.exp_name}; the tables need them equal."
-        )
+    if cfg.exp_name != name:
+        raise ValueError(f"Experiment {exp} sets exp_name={cfg.exp_name}; the tables need {name}.")
     return cfg
 
 
-def check_rows(tables: TablesSettings) -> None:
-    """Composes and checks the config of every row (:func:`~kinet_rl.pipeline.check_config`,
-    its evaluation with the scale's ``eval`` overrides, and its planner under each of
-    ``mpc_budgets``) before any row trains.
+def mpc_config(
+    tables: TablesSettings, model: str, camera: str, seed: int, cfg: DictConfig
+) -> DictConfig:
+    """The config of a row's MPC episodes: its training config ``cfg``, or for a variant with
+    ``train_overrides`` the config without them (the table's scene)."""
+    variant = tables.variants.get(model)
+    if variant is None or not variant.train_overrides:
+        return cfg
+    return row_config(tables, model, camera, seed, training=False)
+
+
+def check_rows(
+    tables: TablesSettings, models: Sequence[str] | None = None, seed: int | None = None
+) -> None:
+    """Composes and checks the config of every row (or of ``models``, with training seed
+    ``seed``; default the first): :func:`~kinet_rl.pipeline.check_config`, its evaluation with
+    the scale's ``eval`` overrides, and its planner under each of ``mpc_budgets``, before any
+    row trains.
 
     Raises:
         ConfigError: The first invalid entry, naming the row it was found in.
     """
-    for model in tables.models:
+    seed = tables.seeds[0] if seed is None else seed
+    for model in tables.models if models is None else models:
         for camera in tables.cameras:
-            cfg = row_config(tables, model, camera, tables.seeds[0])
+            cfg = row_config(tables, model, camera, seed)
             try:
                 check_config(to_dict(cfg))
+                eval_cfg = mpc_config(tables, model, camera, seed, cfg)
+                if eval_cfg is not cfg:
+                    check_config(to_dict(eval_cfg))
                 with config_group("tables.eval"):  # the row's eval group, with these overrides
-                    planner = rearrangement_settings(cfg, tables.eval).planner
-                for name, budget in tables.mpc_budgets.items():
+                    planner = rearrangement_settings(eval_cfg, tables.eval).planner
+                for name in tables.mpc_budgets:
                     with config_group(f"tables.mpc_budgets.{name}"):
-                        check_planner_settings({**planner, **budget})
+                        check_planner_settings({**planner, **tables.budget_planner(name)})
             except ConfigError as err:
                 raise ConfigError(
                     err.key,
-                    f"{err.problem} (in row {cfg.exp_name}: +exp={cfg.exp_name} with the "
-                    f"overrides and eval entries of conf/tables/{tables.scale}.yaml)",
+                    f"{err.problem} (in row {cfg.exp_name}: "
+                    f"+exp={experiment_name(tables.base_model(model), camera, tables.task)} "
+                    f"with the overrides and eval entries of conf/tables/{tables.scale}.yaml)",
                 ) from None
 
 
@@ -285,13 +252,16 @@ def rearrangement_settings(
     tables: TablesSettings | None = None,
 ) -> RearrangementSettings:
     """The row's eval group with the table scale's overrides, and if given these methods and the
-    planner budget ``tables.mpc_budgets[budget]`` (merged onto the eval group's planner)."""
+    MPC table ``budget`` of ``tables`` (its planner merged onto the eval group's, its episodes)."""
     container = to_dict(cfg)
     eval_cfg = {**container["eval"], **eval_overrides}
     if methods is not None:
         eval_cfg["methods"] = methods
     if budget is not None and tables is not None:
-        eval_cfg["planner"] = {**eval_cfg["planner"], **tables.mpc_budgets[budget]}
+        eval_cfg["planner"] = {**eval_cfg["planner"], **tables.budget_planner(budget)}
+        episodes = tables.mpc_budgets[budget].get("episodes")
+        if episodes is not None:
+            eval_cfg["episodes"] = episodes
     return RearrangementSettings.from_dicts(eval_cfg, container["env"])
 
 
@@ -308,11 +278,14 @@ def run_row(
     seed: int = 0,
     run: bool = True,
 ) -> dict[str, Any]:
-    """Trains (unless finished) and evaluates one row and seed; returns its table entries.
+    """Trains (unless finished) and evaluates one row and seed; returns its table entries:
+    ``forward`` (Table I), ``keypoint_accuracy`` (keypoint models; None for the others) and
+    ``mpc`` (per MPC table: the row's stats per condition).
 
     Forward errors use the same test sequences (seed 0) for every row and training seed; the MPC
-    evaluation runs for the first training seed only. With ``run=False`` nothing is trained or
-    evaluated: a stage that has not run raises :class:`NotRun`.
+    evaluation runs for the training seeds of ``tables.planning_seeds``, at every budget that
+    lists the row. With ``run=False`` nothing is trained or evaluated: a stage that has not run
+    raises :class:`NotRun`.
     """
     cfg = row_config(tables, model, camera, seed)
     run_dir = run_dir_of(out_dir, cfg.exp_name, seed)
@@ -337,7 +310,7 @@ def run_row(
         check_dataset_for(net, test)
         scene = settings.scene
         geometry = SceneGeometry.of_scene(scene.task, scene.camera, scene.image_size)
-        floor = net.detector_floor(geometry) if ROWS[model].floor else None
+        floor = net.detector_floor(geometry) if tables.rows[model].floor else None
         return forward_errors(
             net.object_rollout(geometry),
             test,
@@ -348,35 +321,51 @@ def run_row(
         )
 
     forward_errors_of_row = _cached(run_dir / "tables_forward.json", forward, run=run)
-    row: dict[str, Any] = {"forward": forward_errors_of_row, "mpc": {}}
-    if camera == tables.mpc_camera and seed == tables.seeds[0]:
-        kinet_method = rearrangement_settings(cfg, eval_overrides).kinet_method
-        method = ROWS[model].method or kinet_method
-        for i, budget in enumerate(tables.mpc_budgets):
-            # Table II and the backgrounds run at the first budget only.
-            generalization = i == 0 and model in tables.generalization_models
-            settings = rearrangement_settings(cfg, eval_overrides, [method], budget, tables)
+    accuracy = json.loads((run_dir / "results.json").read_text()).get("keypoint_accuracy")
+    row: dict[str, Any] = {
+        "forward": forward_errors_of_row,
+        "keypoint_accuracy": accuracy,
+        "mpc": {},
+    }
+    if camera != tables.mpc_camera or seed not in tables.planning_seeds:
+        return row
+    eval_cfg = mpc_config(tables, model, camera, seed, cfg)
+    kinet_method = rearrangement_settings(eval_cfg, eval_overrides).kinet_method
+    method = tables.rows[model].method or kinet_method
+    for i, budget in enumerate(tables.mpc_budgets):
+        if model not in tables.budget_models(budget):
+            continue
+        # Table II and the backgrounds run at the first budget only.
+        generalization = i == 0 and model in tables.generalization_models
+        settings = rearrangement_settings(eval_cfg, eval_overrides, [method], budget, tables)
 
-            def mpc(
-                settings=settings, generalization=generalization, budget=budget
-            ) -> dict[str, Any]:
-                start = time.monotonic()
-                summary = evaluate_rearrangement(
-                    net, settings, run_dir / f"tables_mpc_{budget}", generalization, progress=True
-                )["summary"]
-                logger.info(
-                    "MPC of %s at %s took %.0f s", cfg.exp_name, budget, time.monotonic() - start
-                )
-                return {cond: by_method[method] for cond, by_method in summary.items()}
+        def mpc(settings=settings, generalization=generalization, budget=budget) -> dict[str, Any]:
+            start = time.monotonic()
+            summary = evaluate_rearrangement(
+                net, settings, run_dir / f"tables_mpc_{budget}", generalization, progress=True
+            )["summary"]
+            logger.info(
+                "MPC of %s at %s took %.0f s", cfg.exp_name, budget, time.monotonic() - start
+            )
+            stats = {cond: by_method[method] for cond, by_method in summary.items()}
+            # random pushes on each background's episodes (Fig. 4b): cond/random
+            for cond, by_method in summary.items():
+                if cond.startswith("background_") and "random" in by_method:
+                    stats[f"{cond}/random"] = by_method["random"]
+            return stats
 
-            key = {"rearrangement": settings.as_dict(), "generalization": generalization}
-            row["mpc"][budget] = _cached(run_dir / f"tables_mpc_{budget}.json", mpc, key, run)
+        key = {"rearrangement": settings.as_dict(), "generalization": generalization}
+        row["mpc"][budget] = _cached(run_dir / f"tables_mpc_{budget}.json", mpc, key, run)
     return row
 
 
 def reference_settings(tables: TablesSettings, budget: str) -> RearrangementSettings:
-    """The rearrangement settings of random pushes and the oracle at ``budget``."""
-    cfg = row_config(tables, tables.models[0], tables.mpc_camera)
+    """The rearrangement settings of random pushes and the oracle at ``budget``: the episodes
+    of its first row of the registry (its first row if all are variants)."""
+    planned = tables.budget_models(budget)
+    model = next((m for m in planned if m not in tables.variants), planned[0])
+    cfg = row_config(tables, model, tables.mpc_camera)
+    cfg = mpc_config(tables, model, tables.mpc_camera, 0, cfg)
     return rearrangement_settings(cfg, tables.eval, ["random", "oracle"], budget, tables)
 
 
@@ -415,6 +404,8 @@ def build_tables(tables: TablesSettings, out_dir: Path, run: bool = True) -> Pat
 def run_job(tables: TablesSettings, job: SweepJob, out_dir: Path) -> None:
     """One job of a sweep: a row (every camera; ``job.seed`` or every seed) or the references,
     each resuming what it finished before (needs an initialised Hydra)."""
+    if job.row is None:
+        raise ValueError("A sweep job names its row (row=<model> or row=references).")
     if job.threads is not None:
         torch.set_num_threads(job.threads)
     seeds = tables.seeds if job.seed is None else (job.seed,)
@@ -422,7 +413,7 @@ def run_job(tables: TablesSettings, job: SweepJob, out_dir: Path) -> None:
         for budget in tables.mpc_budgets:
             references(tables, out_dir, budget)
         return
-    check_rows(replace(tables, models=(job.row,), seeds=seeds))
+    check_rows(tables, [job.row], seeds[0])
     for seed in seeds:
         for camera in tables.cameras:
             logger.info("Sweep job: %s, %s view, seed %d", job.row, camera, seed)
@@ -430,13 +421,15 @@ def run_job(tables: TablesSettings, job: SweepJob, out_dir: Path) -> None:
 
 
 def _build_tables(tables: TablesSettings, out_dir: Path, run: bool = True) -> Path:
+    registry, models, cameras = tables.rows, list(tables.models), list(tables.cameras)
     forward: dict[str, dict[str, list[Any]]] = {}
+    accuracy: dict[str, dict[str, list[float]]] = {}
     run_dirs: dict[str, dict[str, list[Path]]] = {}
     budgets = list(tables.mpc_budgets)
-    mpc: dict[str, dict[str, Any]] = {budget: {} for budget in budgets}
-    cells: dict[str, dict[str, Any]] = {}
+    mpc: dict[str, dict[str, list[Any]]] = {budget: {} for budget in budgets}
+    cells: dict[str, dict[str, list[Any]]] = {}
     seeds = list(tables.seeds)
-    rows = [(m, c, s) for s in seeds for c in tables.cameras for m in tables.models]
+    rows = [(m, c, s) for s in seeds for c in cameras for m in models]
     missing: list[str] = []
     for i, (model, camera, seed) in enumerate(rows, start=1):
         logger.info("Row %d/%d: %s, %s view, seed %d", i, len(rows), model, camera, seed)
@@ -446,13 +439,17 @@ def _build_tables(tables: TablesSettings, out_dir: Path, run: bool = True) -> Pa
             missing.append(f"row={model} seed={seed} ({camera} camera)")
             continue
         forward.setdefault(model, {}).setdefault(camera, []).append(row["forward"])
-        run_dirs.setdefault(camera, {}).setdefault(ROWS[model].label, []).append(
-            run_dir_of(out_dir, experiment_name(model, camera, tables.task), seed)
+        if row["keypoint_accuracy"] is not None:
+            accuracy.setdefault(model, {}).setdefault(camera, []).append(row["keypoint_accuracy"])
+        run_dirs.setdefault(camera, {}).setdefault(registry[model].label, []).append(
+            run_dir_of(out_dir, row_name(tables, model, camera), seed)
         )
-        for budget, by_condition in row["mpc"].items():
-            mpc[budget][model] = by_condition["comparison"]
+        for budget, by_condition in row["mpc"].items():  # seeds in order: lists per seed
+            mpc[budget].setdefault(model, []).append(by_condition["comparison"])
             if budget == budgets[0]:
-                cells[model] = {k: v for k, v in by_condition.items() if k != "comparison"}
+                for cond, stats in by_condition.items():
+                    if cond != "comparison":
+                        cells.setdefault(model, {}).setdefault(cond, []).append(stats)
     mpc_sections, settings_of = [], {}
     for budget in budgets:
         try:
@@ -460,32 +457,50 @@ def _build_tables(tables: TablesSettings, out_dir: Path, run: bool = True) -> Pa
         except NotRun:
             missing.append(f"row={REFERENCES} (random pushes and the oracle at {budget})")
             reference_stats, settings = {}, reference_settings(tables, budget)
-        settings_of[budget] = reference_stats, settings
-        mpc[budget].update(reference_stats)
-        plot = plot_mpc_curves(mpc[budget], out_dir / f"mpc_curves_{budget}.png")
+        settings_of[budget] = settings
+        mpc[budget].update({name: [stats] for name, stats in reference_stats.items()})
+        plot = plot_mpc_curves(mpc[budget], out_dir / f"mpc_curves_{budget}.png", registry)
+        planned = [f"seed {s}" for s in tables.planning_seeds]
+        spread = (
+            "mean ± 95% interval over episodes (Student's t); success: every object within the "
+            "success threshold at T (95% Wilson interval)"
+            if len(planned) == 1
+            else f"mean ± 95% interval over the training seeds' means ({', '.join(planned)}; "
+            "Student's t) and each seed's mean; success: every object within the success "
+            "threshold at T, the mean rate over seeds"
+        )
         mpc_sections += [
             f"## MPC at the {budget} budget: distance to goal after T pushes "
             f"({tables.mpc_camera} camera)",
             "",
-            "Ground-truth mean object distance to its goal position, mm, mean ± 95% interval over "
-            "episodes (Student's t); success: every object within the success threshold at T "
-            f"(95% Wilson interval). Every row plans with {budget_text(settings.planner)}.",
+            f"Ground-truth mean object distance to its goal position, mm, {spread}. Every row "
+            f"plans with {budget_text(settings.planner)}, on {settings.episodes} "
+            f"{settings.split} episodes.",
             "",
             mpc_table(
                 mpc[budget],
-                [*tables.models, "random", "oracle"],
+                [*tables.budget_models(budget), "random", "oracle"],
                 settings.task.num_steps,
                 settings.kinet_method,
+                registry,
             ),
             "",
             f"![distance to goal]({plot.name})",
             "",
         ]
-    settings = settings_of[budgets[0]][1]
     curves = [
         plot_learning_curves(runs, out_dir / f"learning_curves_{camera}.png", f"{camera} camera")
         for camera, runs in run_dirs.items()
     ]
+    if budgets:
+        settings = settings_of[budgets[0]]
+        episodes = (
+            f"rearrangement: {settings.split} episodes, seeds {settings.first_seed} + i (the "
+            f"same episodes for every row; MPC with the models of seeds "
+            f"{list(tables.planning_seeds)})"
+        )
+    else:
+        episodes = "no MPC (mpc_budgets is empty)"
     text = "\n".join(
         [
             f"# KINet comparison tables ({tables.scale} scale)",
@@ -493,8 +508,7 @@ def _build_tables(tables: TablesSettings, out_dir: Path, run: bool = True) -> Pa
             f"Command: `python -m kinet_rl.tables tables={tables.scale}`; row configs: "
             f"`+exp={tables.task}_<camera>view<suffix>` with the overrides of "
             f"`conf/tables/{tables.scale}.yaml`; training seeds {seeds}, test sequences seed 0, "
-            f"rearrangement: {settings.split} episodes, seeds {settings.first_seed} + i (the same "
-            f"episodes for every row; MPC with the models of seed {seeds[0]}).",
+            f"{episodes}.",
             "",
             f"## Table I: single-step forward error ({TASKS[tables.task]}, 3 objects)",
             "",
@@ -503,45 +517,41 @@ def _build_tables(tables: TablesSettings, out_dir: Path, run: bool = True) -> Pa
             f"for each training seed, then mean ± 95% interval over the {len(seeds)} seeds "
             "(Student's t; no interval for one seed).",
             "",
-            table_i(forward, list(tables.models), list(tables.cameras)),
+            table_i(forward, models, cameras, registry=registry),
             "",
             "Learning curves (1-push forward error on validation sequences, every seed): "
             + ", ".join(f"![{p.stem}]({p.name})" for p in curves),
             "",
             "Objects that moved in the push (more than 5 mm) only:",
             "",
-            table_i(forward, list(tables.models), list(tables.cameras), subset="_moved"),
+            table_i(forward, models, cameras, subset="_moved", registry=registry),
             "",
             *[
                 line
-                for camera in tables.cameras
+                for camera in cameras
                 for line in (
                     f"Moved objects after several open-loop pushes, {camera} camera (mm, mean ± "
                     "95% interval over seeds):",
                     "",
-                    horizon_table(
-                        forward, list(tables.models), camera, list(tables.forward_horizons)
-                    ),
+                    horizon_table(forward, models, camera, list(tables.forward_horizons), registry),
                     "",
                 )
             ],
+            *accuracy_section(accuracy, models, cameras, registry),
             *mpc_sections,
-            f"## Table II: generalization (MPC final distance at the {budgets[0]} budget, mm, mean "
-            "± 95% interval)",
-            "",
-            table_ii(
-                cells,
-                list(tables.generalization_models),
-                settings.num_objects,
-                settings.geometries,
-            ),
-            "",
+            *generalization_sections(tables, settings_of, mpc, cells),
             *_missing_section(missing, tables.scale),
         ]
     )
     atomic_write_json(
         out_dir / "tables.json",
-        {"forward": forward, "mpc": mpc, "generalization": cells, "missing": missing},
+        {
+            "forward": forward,
+            "keypoint_accuracy": accuracy,
+            "mpc": mpc,
+            "generalization": cells,
+            "missing": missing,
+        },
     )
     path = out_dir / "tables.md"
     atomic_write_text(path, text)

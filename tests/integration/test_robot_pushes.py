@@ -14,12 +14,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import torch
 from PIL import Image
 
 from kinet_rl import import_data, plan
 from kinet_rl.data import PushRecorder, RandomPushPolicy, load_dataset
 from kinet_rl.data.collection import seeded_env
+from kinet_rl.data.storage import open_episodes
 from kinet_rl.envs import SceneSettings, make_env
 from kinet_rl.keys import PIXELS
 from kinet_rl.models import KINetWorldModel
@@ -116,17 +116,35 @@ def test_recorded_pushes_import_train_and_plan_in_the_robots_metres(
     assert "No object state" in report and "Reconstruction error" in report
 
     model = KINetWorldModel.from_checkpoint(run / "kinet.pt")
-    assert model.scene == SceneSettings(image_size=SIZE, workspace_half_size=ROBOT_HALF_SIZE)
-    now = tmp_path / "now.png"
-    goal = tmp_path / "goal.png"
-    source = data.sample_sequences(1, PUSHES, torch.Generator().manual_seed(0))
-    Image.fromarray(source["pixels"][0, 0].numpy()).save(now)
-    Image.fromarray(source["pixels"][0, -1].numpy()).save(goal)
+    width = RENDER + 2 * SIDE_BAND
+    assert model.scene == SceneSettings(
+        image_size=SIZE,
+        workspace_half_size=ROBOT_HALF_SIZE,
+        source_image_size=(width, RENDER),
+        crop_box=(SIDE_BAND, 0, RENDER),  # the centre crop of the 48 x 40 px frames
+    )
+    # The first training episode is the recorded episode 0: plan from its stored (cropped,
+    # resized) frames and from the camera's own frames, which the planner crops as the import did.
+    episode = open_episodes(imported)[PIXELS][0]
+    stored = {"now": episode[0], "goal": episode[-1]}
+    recorded = imported.parent.parent / "robot" / "episode_000000"
+    camera = {"now": recorded / "frame_000000.png", "goal": recorded / f"frame_{PUSHES:06d}.png"}
+    for name, frame in stored.items():
+        Image.fromarray(frame.numpy()).save(tmp_path / f"{name}.png")
+    with Image.open(camera["now"]) as frame:
+        assert frame.size == (width, RENDER)
     checkpoint = str(run / "kinet.pt")
-    (push,) = plan.main(["--checkpoint", checkpoint, "--image", str(now), "--goal", str(goal)])
-    normalised = np.array(push["normalised"])
+    pushes = [
+        plan.main(["--checkpoint", checkpoint, "--image", str(now), "--goal", str(goal)])[0]
+        for now, goal in (
+            (tmp_path / "now.png", tmp_path / "goal.png"),
+            (camera["now"], camera["goal"]),
+        )
+    ]
+    assert pushes[0]["normalised"] == pushes[1]["normalised"]  # the same images reached the model
+    normalised = np.array(pushes[0]["normalised"])
     assert np.abs(normalised).max() <= 1
-    metres = np.array([*push["start_xy_m"], *push["end_xy_m"]])
+    metres = np.array([*pushes[0]["start_xy_m"], *pushes[0]["end_xy_m"]])
     assert np.allclose(metres, normalised * ROBOT_HALF_SIZE)  # the robot's units
 
 

@@ -31,9 +31,10 @@ from kinet_rl.baselines import ObjectInteractionModel
 from kinet_rl.envs import SceneSettings
 from kinet_rl.models import KINetWorldModel
 from kinet_rl.planners import PushWorldModelEnv
-from kinet_rl.rearrangement.episodes import make_episode, run_episodes
 from kinet_rl.rearrangement.policies import RandomPolicy
-from kinet_rl.rearrangement.settings import SPLIT_SEEDS, TaskSettings
+from kinet_rl.rearrangement.settings import TaskSettings
+from planned_episodes import final_distances_mm as planned_distances_mm
+from planned_episodes import validation_seeds
 
 pytestmark = pytest.mark.slow
 
@@ -82,19 +83,11 @@ class TorchRLPolicy(TensorDictModuleBase):
 
 
 def final_distances_mm(policy, scene: SceneSettings) -> np.ndarray:
-    seeds = [SPLIT_SEEDS["validation"] + i for i in range(EPISODES)]
-    episodes = [make_episode(scene, TASK, seed) for seed in seeds]
-    try:
-        results = run_episodes(episodes, policy, "planner", TASK)
-    finally:
-        for episode in episodes:
-            episode.close()
-    return np.array([1e3 * r.distances[-1] for r in results])
+    return planned_distances_mm(policy, scene, TASK, EPISODES)
 
 
 def random_pushes_mm(scene: SceneSettings) -> np.ndarray:
-    seeds = tuple(SPLIT_SEEDS["validation"] + i for i in range(EPISODES))
-    return final_distances_mm(RandomPolicy(seeds), scene)
+    return final_distances_mm(RandomPolicy(validation_seeds(EPISODES)), scene)
 
 
 def train(tmp: Path, experiment: str, steps: int, *overrides: str) -> Path:

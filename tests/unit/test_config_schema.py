@@ -35,11 +35,18 @@ SCALED = [
 YCB_EXPERIMENTS = [
     name for name in EXPERIMENTS if name.startswith("ycb_") and name.endswith("_visin")
 ]
-YCB_TABLE_SCALES = [
-    scale
-    for scale in TABLE_SCALES
-    if OmegaConf.load(CONF / "tables" / f"{scale}.yaml").get("task") == "ycb"
-]
+
+
+def tables_task(scale: str) -> str | None:
+    """The ``task`` of a ``tables`` config: its own, or the first one its defaults list gives."""
+    config = OmegaConf.load(CONF / "tables" / f"{scale}.yaml")
+    if "task" in config:
+        return config.task
+    parents = [d for d in config.get("defaults", []) if isinstance(d, str) and d != "_self_"]
+    return next((task for d in parents if (task := tables_task(d)) is not None), None)
+
+
+YCB_TABLE_SCALES = [scale for scale in TABLE_SCALES if tables_task(scale) == "ycb"]
 
 
 def experiment_case(*overrides: str) -> Any:
@@ -288,11 +295,55 @@ def test_each_group_refuses_bad_values_naming_them(overrides, key, fragment) -> 
         (["tables.mpc_camera=front"], "tables.mpc_camera", "expected one of cameras"),
         (["tables.models=[kinet,forwards]"], "tables.models", "names from ['kinet'"),
         (["+tables.model=[kinet]"], "tables.model", "did you mean models?"),
-        (
+        (  # no budget is no MPC (Table I alone): nothing to run Table II at
             ["~tables.mpc_budgets", "+tables.mpc_budgets={}"],
-            "tables.mpc_budgets",
-            "expected a non-empty mapping",
+            "tables.generalization_models",
+            "models that plan at the first of mpc_budgets",
         ),
+        (  # a budget set to null is dropped
+            ["tables.mpc_budgets={64x3: null}"],
+            "tables.generalization_models",
+            "there is none",
+        ),
+        (
+            ["++tables.mpc_budgets={64x3: {episodes: 0}}"],
+            "tables.mpc_budgets.64x3.episodes",
+            "got 0",
+        ),
+        (
+            ["++tables.mpc_budgets={64x3: {models: [in]}}"],
+            "tables.generalization_models",
+            "models that plan at the first",
+        ),
+        (
+            ["++tables.mpc_budgets={64x3: {models: [ycb]}}"],
+            "tables.mpc_budgets.64x3.models",
+            "a non-empty list of names from models",
+        ),
+        (["+tables.mpc_budgets={cheap: 3}"], "tables.mpc_budgets.cheap", "expected a mapping"),
+        (["+tables.mpc_seeds=[7]"], "tables.mpc_seeds", "a non-empty list of seeds from [0]"),
+        (["+tables.camera_overrides={front: []}"], "tables.camera_overrides", "from ['top'"),
+        (
+            ["+tables.variants={k3: {model: kinet}}"],
+            "tables.variants.k3.label",
+            "missing; this key is required",
+        ),
+        (
+            ["+tables.variants={k3: {model: kinet_k, label: K}}"],
+            "tables.variants.k3.model",
+            "got 'kinet_k', expected one of ['kinet'",
+        ),
+        (  # its run would be KINet-determ's
+            ["+tables.variants={determ: {model: kinet, label: D}}"],
+            "tables.variants",
+            "gives its run a folder of its own",
+        ),
+        (
+            ["+tables.variants={k3: {model: kinet, label: K, override: ['keypoints=3']}}"],
+            "tables.variants.k3.override",
+            "did you mean overrides?",
+        ),
+        (["tables.models=[kinet,k3]"], "tables.models", "names from ['kinet'"),
         (["+tables.mpc_budgets={a/b: {top_k: 2}}"], "tables.mpc_budgets", "they name files"),
         (
             ["+tables.mpc_budgets={cheap: {topk: 2}}"],

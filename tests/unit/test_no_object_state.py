@@ -5,12 +5,15 @@ states reaches the model's scene and its planner."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
+from PIL import Image
 from tensordict import TensorDict
 
 from kinet_rl.baselines import ImageForwardLoss, VCDNLoss
@@ -177,6 +180,36 @@ def test_the_planner_pushes_in_the_workspace_of_the_models_scene(tiny_kinet) -> 
     assert push.start_xy_m[0] == pytest.approx(push.normalised[0] * HALF_SIZE)
 
 
+def test_a_scene_crops_its_cameras_frames_as_the_import_did() -> None:
+    scene = SceneSettings(image_size=SIZE, source_image_size=(48, 40), crop_box=(4, 0, 40))
+    assert SceneSettings.from_mapping(json.loads(json.dumps(scene.as_dict()))) == scene
+    frame = np.random.default_rng(0).integers(0, 256, (40, 48, 3), dtype=np.uint8)
+    expected = Image.fromarray(frame[:, 4:44]).resize((SIZE, SIZE), Image.Resampling.BOX)
+    assert np.array_equal(scene.model_frame(frame), np.asarray(expected))
+    small = frame[:SIZE, :SIZE]
+    assert scene.model_frame(small) is small  # already the model's size: unchanged
+    assert "crop_box" not in SceneSettings().as_dict()
+    for bad in ({"crop_box": (4, 0, 40)}, {"source_image_size": (48, 40), "crop_box": (9, 0, 40)}):
+        with pytest.raises(ConfigError, match="crop_box"):
+            SceneSettings(**bad)
+
+
+def test_the_planner_takes_the_cameras_own_frames(tiny_kinet) -> None:
+    scene = SceneSettings(image_size=SIZE, source_image_size=(48, 40), crop_box=(4, 0, 40))
+    budget = {"planning_horizon": 1, "num_candidates": 8, "optim_steps": 1, "top_k": 2}
+    rng = np.random.default_rng(1)
+    frames = [rng.integers(0, 256, (40, 48, 3), dtype=np.uint8) for _ in range(2)]
+    model = tiny_kinet()
+    model.scene = scene
+    pushes = [
+        PushPlanner(model, planner=budget, seed=0).next_push(now, goal)
+        for now, goal in (frames, [scene.model_frame(f) for f in frames])
+    ]
+    assert pushes[0] == pushes[1]
+    with pytest.raises(ValueError, match="camera's 48x40 px frames"):
+        PushPlanner(model, planner=budget).next_push(frames[0][:, :44], frames[1][:, :44])
+
+
 def settings_of(*overrides: str) -> ExperimentSettings:
     with initialize_config_dir(config_dir(), version_base="1.3"):
         cfg = compose(config_name="config", overrides=["+exp=smoke", *overrides])
@@ -191,7 +224,12 @@ def test_a_run_on_an_imported_dataset_keeps_its_workspace_and_checks_its_episode
     root = f"data.root={robot_data.parent}"
     settings = settings_of(root, "data.name=robot", f"env.image_size={SIZE}")
     scene = settings.imported_scene(metadata)
-    assert scene == SceneSettings(image_size=SIZE, workspace_half_size=HALF_SIZE)
+    assert scene == SceneSettings(
+        image_size=SIZE,
+        workspace_half_size=HALF_SIZE,
+        source_image_size=(SIZE, SIZE),  # the recorded frames and the square the import kept
+        crop_box=(0, 0, SIZE),
+    )
     with pytest.raises(ConfigError, match="env.image_size"):
         settings_of(root, "data.name=robot").imported_scene(metadata)
     with pytest.raises(ConfigError, match="report.horizons"):

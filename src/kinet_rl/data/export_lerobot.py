@@ -1,7 +1,9 @@
 """Export a dataset as LeRobot v3.0: ``python -m kinet_rl.data.export_lerobot <dataset> <out>``.
 
-Images as PNG in the Parquet files, ``action`` the push in metres (table frame); see
-:mod:`kinet_rl.data.lerobot` and docs/data.md ("LeRobot v3"). Exit status: 0 done, 2 bad input.
+The camera as PNG images in the Parquet files (bit-exact), or with ``--video`` as AV1 MP4 videos
+(lossy, smaller; needs PyAV); ``action`` the push in metres (table frame); see
+:mod:`kinet_rl.data.lerobot_writer`, :mod:`kinet_rl.data.lerobot` (the layout) and docs/data.md
+("LeRobot v3"). Exit status: 0 done, 2 bad input.
 """
 
 from __future__ import annotations
@@ -11,7 +13,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from kinet_rl.data.lerobot import DEFAULT_CAMERA, DEFAULT_FPS, export_lerobot
+from kinet_rl.data.lerobot import DEFAULT_CAMERA, DEFAULT_FPS
+from kinet_rl.data.lerobot_writer import export_lerobot
 from kinet_rl.data.storage import DatasetError
 
 
@@ -20,10 +23,13 @@ def main(argv: Sequence[str] | None = None) -> Path:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("dataset", type=Path, help="a complete kinet_rl dataset folder")
     parser.add_argument("out", type=Path, help="the new LeRobot folder (absent or empty)")
-    parser.add_argument("--camera", default=DEFAULT_CAMERA, help="image feature key")
+    parser.add_argument("--camera", default=DEFAULT_CAMERA, help="camera feature key")
     parser.add_argument("--fps", type=int, default=DEFAULT_FPS, help="stated frame rate")
     parser.add_argument(
         "--no-object-state", action="store_true", help="leave out object positions and yaws"
+    )
+    parser.add_argument(
+        "--video", action="store_true", help="store the camera as AV1 MP4 videos (lossy)"
     )
     args = parser.parse_args(argv)
     try:
@@ -33,6 +39,7 @@ def main(argv: Sequence[str] | None = None) -> Path:
             camera=args.camera,
             include_object_state=not args.no_object_state,
             fps=args.fps,
+            video=args.video,
         )
     except DatasetError as err:
         sys.stderr.write(f"error: {type(err).__name__}: {err}\n")

@@ -38,6 +38,7 @@ from kinet_rl.data.storage import (
     EpisodeWriter,
     imported_metadata,
 )
+from kinet_rl.envs.frames import resize_filter, square_frame
 from kinet_rl.envs.settings import check_image_size
 from kinet_rl.keys import ACTION, PIXELS
 
@@ -166,9 +167,7 @@ class ImportPlan:
     @property
     def resample(self) -> Image.Resampling:
         """The resize filter: box (area average) when shrinking, bicubic when enlarging."""
-        if self.box[2] >= self.settings.image_size:
-            return Image.Resampling.BOX
-        return Image.Resampling.BICUBIC
+        return resize_filter(self.box[2], self.settings.image_size)
 
     def describe(self, path: Path | None = None) -> str:
         """What the import does, in a few lines (the command prints it before starting)."""
@@ -211,12 +210,8 @@ class ImportPlan:
         and ``source_episode``."""
         source, first = self.windows[index]
         episode, length = self.folder.episodes[source], self.episode_length
-        left, top, size = self.box
-        target = (self.settings.image_size, self.settings.image_size)
         frames = [
-            np.asarray(
-                image.crop((left, top, left + size, top + size)).resize(target, self.resample)
-            )
+            np.asarray(square_frame(image, self.box, self.settings.image_size))
             for image in episode.load_frames(first, first + length + 1)
         ]
         return TensorDict(

@@ -7,8 +7,11 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
+import numpy as np
+
 from kinet_rl.config_schema import require, settings_from
 from kinet_rl.envs.blocks import BLOCK_SIZE_RANGES
+from kinet_rl.envs.frames import square_array
 from kinet_rl.envs.scene import CAMERAS
 from kinet_rl.envs.workspace import workspace_for
 
@@ -56,6 +59,11 @@ class SceneSettings:
     #: dataset (``python -m kinet_rl.import_data``) states its own. None: the task's (0.20 m
     #: blocks, 0.30 m YCB); see :attr:`half_size`.
     workspace_half_size: float | None = None
+    #: A robot camera's frame size ``(width, height)`` and the square ``(left, top, size)`` of it
+    #: that an import kept (then resized to :attr:`image_size`): :meth:`model_frame` applies the
+    #: same to a live frame. None: frames are already the model's images (simulated scenes).
+    source_image_size: tuple[int, int] | None = None
+    crop_box: tuple[int, int, int] | None = None
 
     def __post_init__(self) -> None:
         for name, choices in (
@@ -90,6 +98,16 @@ class SceneSettings:
                 self.workspace_half_size,
                 "null (the task's workspace) or metres > 0",
             )
+        if self.crop_box is not None or self.source_image_size is not None:
+            width, height = self.source_image_size or (0, 0)
+            left, top, size = self.crop_box or (0, 0, 0)
+            require(
+                size >= 1 and min(left, top) >= 0 and left + size <= width and top + size <= height,
+                "crop_box",
+                self.crop_box,
+                f"a square (left, top, size) inside the source frames {self.source_image_size}, "
+                "both given or neither",
+            )
 
     @property
     def half_size(self) -> float:
@@ -106,9 +124,20 @@ class SceneSettings:
         return settings_from(cls, {k: v for k, v in values.items() if k in names})
 
     def as_dict(self) -> dict[str, Any]:
-        """Plain-container form (for JSON and checkpoints); ``workspace_half_size`` only where
-        given, so a simulated scene's form is also :func:`~kinet_rl.envs.make_env`'s arguments."""
+        """Plain-container form (for JSON and checkpoints); a robot's workspace and frame crop
+        only where given, so a simulated scene's form is also
+        :func:`~kinet_rl.envs.make_env`'s arguments."""
         values = asdict(self)
-        if values["workspace_half_size"] is None:
-            del values["workspace_half_size"]
+        for name in ("workspace_half_size", "source_image_size", "crop_box"):
+            if values[name] is None:
+                del values[name]
         return values
+
+    def model_frame(self, frame: np.ndarray) -> np.ndarray:
+        """An RGB uint8 ``[H, W, 3]`` camera frame as the model's image: a frame of the source
+        camera's size is cropped and resized as its import did; other frames pass unchanged."""
+        if self.crop_box is None or self.source_image_size is None:
+            return frame
+        if (frame.shape[1], frame.shape[0]) != tuple(self.source_image_size):
+            return frame
+        return square_array(frame, self.crop_box, self.image_size)

@@ -67,7 +67,9 @@ class PushPlanner:
     produced: the objective and planner settings stored with the model (``model.planning``,
     from its checkpoint) and the workspace of the scene it was trained on (``model.scene``).
     The planner's warm start (its previous plan shifted by one) is kept between calls and
-    cleared when the goal changes or :meth:`reset` is called. :meth:`next_pushes` plans for
+    cleared when the goal changes or :meth:`reset` is called. A model trained on a robot's
+    imported pushes takes the camera's own frames: they are cropped and resized as the import
+    did (the checkpoint keeps the crop); frames already of the model's size pass unchanged. :meth:`next_pushes` plans for
     several scenes at once (one batched planner call; each scene keeps its own warm start).
 
     Example:
@@ -109,6 +111,7 @@ class PushPlanner:
         self.objective = objective or model.planning.objective
         self.settings = dict(model.planning.planner if planner is None else planner)
         self.capabilities = model.capabilities
+        self.scene = scene
         self.image_size = None if scene is None else scene.image_size
         self.world_model = model.world_model(self.objective)
         self.env = PushWorldModelEnv(self.world_model)
@@ -143,7 +146,8 @@ class PushPlanner:
                     f"{tuple(batch.shape)}; use next_push for one image."
                 )
             as_image_tensor(batch[0], name)
-        check_image_sizes(images[0], goal_images[0], self.image_size)
+        images, goal_images = self._model_images(images), self._model_images(goal_images)
+        check_image_sizes(images[0], goal_images[0], self.image_size, self._source_size)
         if self._goal is None or not torch.equal(self._goal, goal_images):
             if self._goal is not None:
                 logger.info("PushPlanner: new goal image; warm start cleared.")
@@ -153,6 +157,17 @@ class PushPlanner:
             {PIXELS: images, GOAL_PIXELS: goal_images}, batch_size=images.shape[:1]
         )
         return [self._push(action) for action in self.plan(observation)]
+
+    @property
+    def _source_size(self) -> tuple[int, int] | None:
+        return None if self.scene is None else self.scene.source_image_size
+
+    def _model_images(self, frames: Tensor) -> Tensor:
+        """Frames of the robot's camera cropped and resized as its import did (the model's
+        scene says how); frames of other sizes unchanged."""
+        if self.scene is None or self.scene.crop_box is None:
+            return frames
+        return torch.from_numpy(np.stack([self.scene.model_frame(f.numpy()) for f in frames.cpu()]))
 
     def plan(self, observation: TensorDictBase) -> Tensor:
         """Normalised pushes ``[*B, 4]`` for a ``[*B]`` tensordict of the model's observation and
@@ -181,15 +196,27 @@ class PushPlanner:
         )
 
 
-def check_image_sizes(image: Tensor, goal: Tensor, model_size: int | None) -> None:
-    """Raises a ValueError naming both sizes if ``image`` ``[H, W, 3]`` is not the model's
-    square size or ``goal`` is not the image's size."""
+def check_image_sizes(
+    image: Tensor,
+    goal: Tensor,
+    model_size: int | None,
+    source_size: tuple[int, int] | None = None,
+) -> None:
+    """Raises a ValueError naming the sizes if ``image`` ``[H, W, 3]`` is not the model's square
+    size or ``goal`` is not the image's size (``source_size``: the robot camera's frame size,
+    which the planner crops, named in the error)."""
     height, width = image.shape[:2]
     if model_size is not None and (height, width) != (model_size, model_size):
+        camera = (
+            ""
+            if source_size is None
+            else f", or the camera's {source_size[0]}x{source_size[1]} px frames (cropped as "
+            "its import did)"
+        )
         raise ValueError(
             f"The image is {width}x{height} px but the model was trained on {model_size}x"
-            f"{model_size} px images; pass images of the model's camera and size (the command "
-            "line resizes only when asked: --resize)."
+            f"{model_size} px images; pass images of the model's camera and size{camera} (the "
+            "command line resizes only when asked: --resize)."
         )
     if goal.shape != image.shape:
         raise ValueError(

@@ -17,7 +17,11 @@ from kinet_rl.pipeline.capabilities import (
 )
 from kinet_rl.pipeline.datasets import DatasetJob, collect_datasets, dataset_jobs, dataset_path
 from kinet_rl.pipeline.experiment import evaluate_rearrangement, held_out_sets, run_experiment
-from kinet_rl.pipeline.pretrained import pretrained_keypoint_accuracy
+from kinet_rl.pipeline.pretrained import (
+    CHECK_PROTOCOL,
+    fresh_keypoint_accuracy,
+    pretrained_keypoint_accuracy,
+)
 from kinet_rl.pipeline.settings import ExperimentSettings, check_config, check_data
 
 __all__ = [
@@ -32,5 +36,7 @@ __all__ = [
     "evaluate_rearrangement",
     "held_out_sets",
     "pretrained_keypoint_accuracy",
+    "fresh_keypoint_accuracy",
+    "CHECK_PROTOCOL",
     "run_experiment",
 ]

@@ -155,8 +155,8 @@ def _train_and_evaluate(
         scene, expect = settings.imported_scene(imported), {"image_size": scene.image_size}
         log.info(
             "%s was imported (python -m kinet_rl.import_data), not collected: no generalization "
-            "sets, no rearrangement evaluation (no simulator of its scene); workspace half size "
-            "%s m.",
+            "sets, no rearrangement evaluation (a robot's scene has no simulator; for data of a "
+            "simulated scene, python -m kinet_rl.evaluate replays it); workspace half size %s m.",
             settings.dataset_path,
             scene.workspace_half_size,
         )

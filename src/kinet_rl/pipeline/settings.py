@@ -23,6 +23,7 @@ from kinet_rl.config_schema import (
 )
 from kinet_rl.data import collect_dataset, split_ranges
 from kinet_rl.data.collection import DEFAULT_SPLITS, check_collection
+from kinet_rl.data.storage import IMPORT_RECORD
 from kinet_rl.envs.factory import check_env_arguments
 from kinet_rl.envs.settings import SceneSettings
 from kinet_rl.evaluation.report import ReportSettings
@@ -255,7 +256,14 @@ class ExperimentSettings:
         length = metadata["episode_length"]
         limit = f"{length}, the pushes per episode of the imported dataset {path}"
         self._check_windows(length, limit, "the imported episodes' pushes")
-        return replace(self.scene, workspace_half_size=float(metadata["workspace_half_size"]))
+        record = metadata.get(IMPORT_RECORD, {})
+        box, source = record.get("settings", {}).get("crop_box"), record.get("source_image_size")
+        return replace(
+            self.scene,
+            workspace_half_size=float(metadata["workspace_half_size"]),
+            crop_box=None if box is None else tuple(box),
+            source_image_size=None if source is None else tuple(source),
+        )
 
     def identity(self) -> dict[str, Any]:
         """The settings a checkpoint must share with the run that resumes it."""
