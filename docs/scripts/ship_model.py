@@ -8,7 +8,7 @@ seed 0, with no motion and the detector floor; ``forward_error.py``), and the ``
 ``kinet_rl.pipeline.CHECK_PROTOCOL``). Then writes ``--out`` with ``save_pretrained`` (weights,
 ``config.json`` with the scene and the planning defaults stored in the checkpoint, ``README.md``
 card). The shipped models are ``src/kinet_rl/models/weights/<name>``; the commands that shipped
-them are in docs/results.md ("Shipped models").
+them are in the README ("Pretrained models") and each card.
 """
 
 from __future__ import annotations

@@ -38,8 +38,8 @@ def shipped() -> list:
     ]
 
 
-def test_blocks_model_is_shipped() -> None:
-    assert "blocks_topview" in pretrained_names()
+def test_the_blocks_models_are_shipped() -> None:
+    assert {"blocks_topview", "blocks_sideview"} <= set(pretrained_names())
 
 
 @pytest.mark.parametrize("name", shipped())
