@@ -69,8 +69,9 @@ class PushPlanner:
     The planner's warm start (its previous plan shifted by one) is kept between calls and
     cleared when the goal changes or :meth:`reset` is called. A model trained on a robot's
     imported pushes takes the camera's own frames: they are cropped and resized as the import
-    did (the checkpoint keeps the crop); frames already of the model's size pass unchanged. :meth:`next_pushes` plans for
-    several scenes at once (one batched planner call; each scene keeps its own warm start).
+    did (the checkpoint keeps the crop); frames already of the model's size pass unchanged.
+    :meth:`next_pushes` plans for several scenes at once (one batched planner call; each scene
+    keeps its own warm start).
 
     Example:
         >>> planner = PushPlanner(KINetWorldModel.from_checkpoint("runs/x/kinet.pt"))
@@ -167,6 +168,8 @@ class PushPlanner:
         scene says how); frames of other sizes unchanged."""
         if self.scene is None or self.scene.crop_box is None:
             return frames
+        if tuple(frames.shape[1:3]) == (self.image_size, self.image_size):
+            return frames  # already the model's images: no per-step copy on the planning path
         return torch.from_numpy(np.stack([self.scene.model_frame(f.numpy()) for f in frames.cpu()]))
 
     def plan(self, observation: TensorDictBase) -> Tensor:
